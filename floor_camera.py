@@ -1,0 +1,193 @@
+"""A floor-plane camera model: what a camera on a Kobuki sees of tape lines on the floor.
+
+The track is drawn once from above into a floor map (FLOOR_RES metres per pixel). Each camera
+pixel's ray, through the lens distortion, is intersected with the floor once per mounting;
+rendering a pose is then one cv2.remap from the floor map. Rays that miss the floor, or hit it
+beyond `max_range`, see a wall whose brightness changes with direction (furniture, doors):
+extra edges above the lane, like the lecture's "camera's view" for algorithm 1.0.
+
+Frames (robot): x forward, y left, z up, metres; yaw counter-clockwise, radians.
+Camera: OpenCV's (x right, y down, z along the optical axis), pitched down by `pitch_deg`.
+"""
+
+import math
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+FLOOR_RES = 0.002  # [m/px] floor map resolution
+
+
+@dataclass
+class Mounting:
+    height: float = 0.20  # [m] lens above the floor
+    pitch_deg: float = 0.0  # [deg] optical axis below horizontal
+    forward: float = 0.10  # [m] lens ahead of the robot's centre
+
+
+@dataclass
+class Scene:
+    floor: float = 95.0  # floor brightness [0-255]
+    tape: float = 235.0  # tape brightness [0-255]
+    noise: float = 3.0  # frame noise sigma [grey levels]
+    max_range: float = 3.0  # [m] floor visible up to here, then a wall
+    wall: float = 150.0  # mean wall brightness [0-255]
+    gradient: float = 0.0  # lighting gradient across the frame, left to right [grey levels]
+    glare: float = 0.0  # brightness added by a glare patch near the image centre [grey levels]
+
+
+@dataclass
+class Track:
+    """A lane of two tape lines either side of a centre line made of straights and arcs.
+
+    segments: [{"straight": metres}, {"arc": {"radius": m, "angle_deg": deg}}, ...];
+    positive angle_deg turns left. The centre line starts at (0, 0) heading along +x.
+    """
+
+    lane_width: float = 0.35  # [m] between the tape centres
+    tape_width: float = 0.03  # [m]
+    segments: list = field(default_factory=lambda: [{'straight': 3.0}])
+    start: tuple = (0.0, 0.0, 0.0)  # centre line start (x, y, heading) [m, m, rad]
+    step: float = 0.005  # [m] centre line sampling
+
+    def __post_init__(self):
+        self.centre = self._sample()  # (N, 4): x, y, heading, s
+
+    def _sample(self):
+        x, y, h = self.start
+        pts, s = [(x, y, h, 0.0)], 0.0
+        for seg in self.segments:
+            if 'straight' in seg:
+                length, curvature = float(seg['straight']), 0.0
+            else:
+                arc = seg['arc']
+                radius, angle = float(arc['radius']), math.radians(float(arc['angle_deg']))
+                length, curvature = radius * abs(angle), math.copysign(1.0 / radius, angle)
+            n = max(1, int(math.ceil(length / self.step)))
+            ds = length / n
+            for _ in range(n):
+                if curvature == 0.0:
+                    x, y = x + ds * math.cos(h), y + ds * math.sin(h)
+                else:
+                    h2 = h + curvature * ds
+                    r = 1.0 / curvature
+                    x += r * (math.sin(h2) - math.sin(h))
+                    y -= r * (math.cos(h2) - math.cos(h))
+                    h = h2
+                s += ds
+                pts.append((x, y, h, s))
+        return np.array(pts)
+
+    @property
+    def length(self):
+        return float(self.centre[-1, 3])
+
+    def pose_at(self, s, offset=0.0, yaw_error=0.0):
+        """Robot pose at arc length s, `offset` metres left of the centre line, yawed."""
+        i = int(np.clip(np.searchsorted(self.centre[:, 3], s), 0, len(self.centre) - 1))
+        x, y, h, _ = self.centre[i]
+        return (x - offset * math.sin(h), y + offset * math.cos(h), h + yaw_error)
+
+    def tape_lines(self):
+        """The two tape centre lines as (N, 2) arrays: left, right."""
+        c = self.centre
+        normal = np.stack([-np.sin(c[:, 2]), np.cos(c[:, 2])], axis=1)
+        half = self.lane_width / 2
+        return c[:, :2] + half * normal, c[:, :2] - half * normal
+
+
+class FloorMap:
+    """The track drawn from above: tape brightness 1, floor 0, float32."""
+
+    def __init__(self, track, margin=5.0, res=FLOOR_RES):
+        left, right = track.tape_lines()
+        pts = np.vstack([left, right])
+        self.origin = pts.min(axis=0) - margin
+        size = np.ceil((pts.max(axis=0) + margin - self.origin) / res).astype(int) + 1
+        self.res = res
+        canvas = np.zeros((size[1], size[0]), np.uint8)
+        thickness = max(1, int(round(track.tape_width / res)))
+        for line in (left, right):
+            px = np.round((line - self.origin) / res * 16).astype(np.int32)  # 4 bits subpixel
+            cv2.polylines(canvas, [px.reshape(-1, 1, 2)], False, 255, thickness, cv2.LINE_AA,
+                          shift=4)
+        self.image = canvas.astype(np.float32) / 255.0
+
+    def to_pixels(self, xy):
+        return (xy - self.origin) / self.res
+
+
+class FloorCamera:
+    """Renders the onboard view of a track from a robot pose."""
+
+    def __init__(self, camera, mounting=None, supersample=2):
+        self.camera = camera
+        self.mounting = mounting or Mounting()
+        self.supersample = supersample
+        w, h = camera.image_size
+        n = supersample
+        # subpixel centres of every pixel, through the lens, to normalised rays
+        us = (np.arange(w * n) + 0.5) / n - 0.5
+        vs = (np.arange(h * n) + 0.5) / n - 0.5
+        uu, vv = np.meshgrid(us, vs)
+        pix = np.stack([uu.ravel(), vv.ravel()], axis=1).astype(np.float64).reshape(-1, 1, 2)
+        crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-10)
+        norm = cv2.undistortPointsIter(pix, camera.matrix, camera.distortion, None, None, crit)
+        self._norm = norm.reshape(h * n, w * n, 2)
+        self._rays_robot = self._rays(self.mounting)
+
+    def _rays(self, m):
+        p = math.radians(m.pitch_deg)
+        x_cam = np.array([0.0, -1.0, 0.0])
+        y_cam = np.array([-math.sin(p), 0.0, -math.cos(p)])
+        z_cam = np.array([math.cos(p), 0.0, -math.sin(p)])
+        xn, yn = self._norm[..., 0:1], self._norm[..., 1:2]
+        return xn * x_cam + yn * y_cam + z_cam  # (H, W, 3) ray directions, robot frame
+
+    def floor_hits(self, max_range):
+        """Per subpixel: floor point (x, y) in the robot frame, and whether it is on the floor."""
+        m, d = self.mounting, self._rays_robot
+        down = -d[..., 2]
+        sky = down <= 1e-9
+        t = m.height / np.where(sky, 1.0, down)
+        x = m.forward + t * d[..., 0]
+        y = t * d[..., 1]
+        hit = ~sky & (np.hypot(x - m.forward, y) <= max_range)
+        return x, y, hit
+
+    def render(self, floor_map, pose, scene=None, rng=None):
+        """One BGR frame of the floor at robot pose (x, y, yaw)."""
+        scene = scene or Scene()
+        x, y, hit = self.floor_hits(scene.max_range)
+        px, py, yaw = pose
+        c, s = math.cos(yaw), math.sin(yaw)
+        wx = px + c * x - s * y
+        wy = py + s * x + c * y
+        mx = ((wx - floor_map.origin[0]) / floor_map.res).astype(np.float32)
+        my = ((wy - floor_map.origin[1]) / floor_map.res).astype(np.float32)
+        mx[~hit] = -1
+        my[~hit] = -1
+        tape = cv2.remap(floor_map.image, mx, my, cv2.INTER_LINEAR,
+                         borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        img = scene.floor + (scene.tape - scene.floor) * tape
+        # the wall: brightness by world direction of the ray, in 12 degree panels
+        azimuth = np.arctan2(s * self._rays_robot[..., 0] + c * self._rays_robot[..., 1],
+                             c * self._rays_robot[..., 0] - s * self._rays_robot[..., 1])
+        panel = np.floor((azimuth + math.pi) / math.radians(12)).astype(int) % 30
+        wall_levels = scene.wall + 60 * np.sin(np.arange(30) * 2.39996)  # golden-angle spread
+        img = np.where(hit, img, wall_levels[panel])
+        n = self.supersample
+        h, w = img.shape[0] // n, img.shape[1] // n
+        img = img.reshape(h, n, w, n).mean(axis=(1, 3))
+        if scene.gradient:
+            img = img + scene.gradient * (np.linspace(-0.5, 0.5, w)[None, :])
+        if scene.glare:
+            yy, xx = np.mgrid[0:h, 0:w]
+            img = img + scene.glare * np.exp(-(((xx - w * 0.55) / (w * 0.12)) ** 2
+                                               + ((yy - h * 0.7) / (h * 0.12)) ** 2))
+        if scene.noise:
+            rng = rng if rng is not None else np.random.default_rng(0)
+            img = img + rng.normal(0.0, scene.noise, img.shape)
+        gray = np.clip(np.round(img), 0, 255).astype(np.uint8)
+        return cv2.cvtColor(gray, cv2.COLOR_GRAY2BGR)

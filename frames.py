@@ -1,0 +1,139 @@
+"""Frame sources for kobuki_lane: everything --source accepts, behind one read() call.
+
+    0, 1, ...            a camera index              cv2.VideoCapture(0)      live
+    run.mp4              a video file                cv2.VideoCapture(path)
+    frames/%04d.png      an image-sequence pattern   cv2.VideoCapture(pattern)
+    rtsp://..., http://  any URL VideoCapture takes  cv2.VideoCapture(url)    live
+    samples/track/       a folder of images, read in name order
+    picture.png          one image
+
+read() returns (ok, frame, label): label is the file name for folders and images, the frame
+index otherwise. Unreadable files in a folder are skipped with a warning and counted.
+"""
+
+import os
+import sys
+
+import cv2
+
+IMAGE_EXTENSIONS = ('.png', '.jpg', '.jpeg', '.bmp', '.tif', '.tiff', '.webp', '.pgm', '.ppm',
+                    '.pnm')
+
+
+class SourceError(Exception):
+    """A source that cannot be opened; the message names it and says what to check."""
+
+
+class CaptureSource:
+    """Frames from cv2.VideoCapture: camera, video file, image-sequence pattern or URL."""
+
+    def __init__(self, spec, capture_arg, live):
+        self.name = str(spec)
+        self.live = live
+        self.skipped = 0
+        self._index = 0
+        self.total = None
+        self._cap = cv2.VideoCapture(capture_arg)
+        if not self._cap.isOpened():
+            self._cap.release()
+            what = f'camera {spec}' if isinstance(capture_arg, int) else f"'{spec}'"
+            raise SourceError(f'cannot open {what} with OpenCV VideoCapture '
+                              '(check the index, path or URL, and that the format is readable)')
+        count = int(self._cap.get(cv2.CAP_PROP_FRAME_COUNT))
+        if not live and count > 0:
+            self.total = count
+
+    def read(self):
+        ok, frame = self._cap.read()
+        if not ok or frame is None:
+            return False, None, self._index
+        label = self._index
+        self._index += 1
+        return True, frame, label
+
+    def release(self):
+        self._cap.release()
+
+
+class FolderSource:
+    """Image files from a folder (sorted by name) or a single image file."""
+
+    live = False
+
+    def __init__(self, spec, files, warn=None):
+        self.name = str(spec)
+        self.skipped = 0
+        self._files = list(files)
+        self.total = len(self._files)
+        self._next = 0
+        self._warn = warn or (lambda msg: print(f'warning: {msg}', file=sys.stderr))
+
+    def read(self):
+        while self._next < len(self._files):
+            path = self._files[self._next]
+            self._next += 1
+            frame = cv2.imread(path, cv2.IMREAD_UNCHANGED)
+            if frame is None or frame.size == 0:
+                self.skipped += 1
+                self._warn(f'skipped {path}: not a readable image')
+                continue
+            return True, frame, os.path.basename(path)
+        return False, None, None
+
+    def release(self):
+        pass
+
+
+class ListSource:
+    """Frames already in memory (tests, the simulator); labels are their indices."""
+
+    live = False
+
+    def __init__(self, frames, name='frames'):
+        self.name = name
+        self.skipped = 0
+        self._frames = list(frames)
+        self.total = len(self._frames)
+        self._next = 0
+
+    def read(self):
+        if self._next >= len(self._frames):
+            return False, None, None
+        self._next += 1
+        return True, self._frames[self._next - 1], self._next - 1
+
+    def release(self):
+        pass
+
+
+def is_image_file(path):
+    return path.lower().endswith(IMAGE_EXTENSIONS)
+
+
+def open_source(spec, warn=None):
+    """Open what --source names; SourceError if it cannot be opened."""
+    spec = str(spec)
+    if spec.isdigit():
+        return CaptureSource(spec, int(spec), live=True)
+    if '://' in spec:
+        return CaptureSource(spec, spec, live=True)
+    if '%' in spec:
+        folder = os.path.dirname(spec) or '.'
+        if not os.path.isdir(folder):
+            raise SourceError(f"cannot open '{spec}': folder '{folder}' does not exist")
+        return CaptureSource(spec, spec, live=False)
+    if os.path.isdir(spec):
+        files = sorted(os.path.join(spec, f) for f in os.listdir(spec) if is_image_file(f))
+        if not files:
+            raise SourceError(f"folder '{spec}' has no image files ({', '.join(IMAGE_EXTENSIONS)})")
+        return FolderSource(spec, files, warn)
+    if not os.path.exists(spec):
+        raise SourceError(f"cannot open '{spec}': no such file or folder "
+                          "(give a camera index, video, image folder, %04d pattern or URL)")
+    if os.path.getsize(spec) == 0:
+        raise SourceError(f"cannot open '{spec}': the file is empty")
+    if is_image_file(spec):
+        if cv2.imread(spec, cv2.IMREAD_UNCHANGED) is None:
+            raise SourceError(f"cannot open '{spec}': not a readable image")
+        return FolderSource(spec, [spec], warn)
+    return CaptureSource(spec, spec, live=False)

@@ -1,0 +1,654 @@
+#!/usr/bin/env python3
+"""Lane following for a Kobuki, as in IISc "Advanced IoT Applications", Lecture 14.
+
+Each frame: undistort with the lecture's camera (calibration_camera), gray, GaussianBlur 5x5,
+Canny 85/85, mask to the region_of_interest triangle (0,h) (w/2,h/2) (w,h) (algorithm 1.1),
+HoughLinesP, then theta = sum of atan2 over every segment. theta > 6: turn left,
+theta < -6: turn right, else straight; a geometry_msgs/Twist ("thrust") goes to
+/mobile_base/commands/velocity at 4 Hz. Where the lecture's code had defects this node fixes
+them (see README): no segments, or |theta| == 6 exactly, stops the robot (decision "none"),
+and every way of ending the run publishes a zero Twist first.
+
+usage:
+    python kobuki_lane.py                              the robot: camera 0, beside
+                                                       roslaunch kobuki_node minimal.launch
+    python kobuki_lane.py --source samples/track --dry-run --decisions d.jsonl --video d.avi
+    roslaunch kobuki_lane kobuki_lane.launch           the same node with launch parameters
+
+default values: the lecture's numbers (--help lists each with its unit). Each setting can come
+from a flag, a private ROS parameter (_threshold:=8 or <param> in a launch file), or the
+default, in that order of precedence.
+
+exit status: 0 input ended or the node was shut down, 1 camera lost, 2 bad arguments, an
+unopenable source or no ROS master, 130 Ctrl-C, 143 SIGTERM.
+"""
+
+import argparse
+import dataclasses
+import json
+import math
+import os
+import signal
+import socket
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from calibration import CalibrationError, calibration_camera, load_calibration
+from frames import SourceError, open_source
+
+TOPIC = '/mobile_base/commands/velocity'  # kobuki_node's velocity command input
+
+
+def _positive(x):
+    return math.isfinite(x) and x > 0
+
+
+def _finite(x):
+    return math.isfinite(x)
+
+
+def _odd_positive(x):
+    return x > 0 and x % 2 == 1
+
+
+def setting(default, help, unit='', check=None, choices=None):
+    """One row of the defaults table: value, unit, where it comes from, and its check."""
+    return field(default=default, metadata=dict(help=help, unit=unit, check=check, choices=choices))
+
+
+@dataclass
+class LaneParams:
+    """Every number the node uses, with its unit and its place in the lecture."""
+
+    algorithm: str = setting('1.1', "'1.1' masks the Canny edges with the ROI triangle "
+                             "before Hough; '1.0' does not (the lecture's first demo)",
+                             choices=('1.0', '1.1'))
+    blur_kernel: int = setting(5, 'GaussianBlur kernel size, odd (lecture: (5, 5), sigma 0)',
+                               'px', _odd_positive)
+    canny_low: float = setting(85.0, 'Canny lower hysteresis threshold (lecture: 85)', '',
+                               _finite)
+    canny_high: float = setting(85.0, 'Canny upper hysteresis threshold (lecture: 85)', '',
+                                _finite)
+    hough_rho: float = setting(6.0, 'HoughLinesP distance resolution (lecture: rho=6)', 'px',
+                               _positive)
+    hough_theta: float = setting(math.pi / 60, 'HoughLinesP angle resolution '
+                                 '(lecture: theta=pi/60)', 'rad', _positive)
+    hough_threshold: int = setting(160, 'HoughLinesP accumulator votes (lecture: 160)', 'votes',
+                                   _positive)
+    min_line_length: float = setting(40.0, 'HoughLinesP minLineLength (lecture: 40)', 'px',
+                                     _finite)
+    max_line_gap: float = setting(25.0, 'HoughLinesP maxLineGap (lecture: 25)', 'px', _finite)
+    slope_min: float = setting(0.5, 'segments with |slope| below this join neither slope group '
+                               '(lecture: 0.5)', '', _finite)
+    threshold: float = setting(6.0, 'theta above +threshold turns left, below -threshold right '
+                               '(lecture: threshold = 6)', 'rad, summed', _finite)
+    turn_linear: float = setting(0.01, 'forward speed while turning (lecture: 0.01)', 'm/s',
+                                 _finite)
+    turn_angular: float = setting(0.06, 'turn rate; left +, right - (lecture: 0.06)', 'rad/s',
+                                  _finite)
+    straight_linear: float = setting(0.05, 'forward speed going straight (lecture: 0.05)', 'm/s',
+                                     _finite)
+    rate: float = setting(4.0, 'loop and publish rate (lecture: rospy.Rate(4))', 'Hz', _positive)
+
+    def validate(self):
+        """Raise ValueError naming the first setting that is out of range."""
+        for f in dataclasses.fields(self):
+            value, meta = getattr(self, f.name), f.metadata
+            if meta['choices'] and value not in meta['choices']:
+                raise ValueError(f"{f.name} must be one of {', '.join(meta['choices'])}, "
+                                 f"not {value!r}")
+            if meta['check'] and not meta['check'](value):
+                raise ValueError(f'{f.name} = {value!r} is out of range: {meta["help"]}')
+        return self
+
+
+# ---------------------------------------------------------------- the lecture's stages
+
+def as_bgr(frame):
+    """Any frame (gray, 1/3/4 channels, 8/16-bit or float) as 8-bit BGR."""
+    if frame.dtype == np.uint16:
+        frame = (frame >> 8).astype(np.uint8)
+    elif frame.dtype != np.uint8:
+        f = np.nan_to_num(frame.astype(np.float64))
+        scale = 255.0 if f.size and f.max() <= 1.0 else 1.0
+        frame = np.clip(f * scale, 0, 255).astype(np.uint8)
+    if frame.ndim == 2 or frame.shape[2] == 1:
+        return cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR)
+    if frame.shape[2] == 4:
+        return cv2.cvtColor(frame, cv2.COLOR_BGRA2BGR)
+    return frame
+
+
+def region_of_interest_vertices(width, height):
+    """The lecture's triangle: bottom corners and the image centre, for any frame size."""
+    return np.array([[(0, height), (width / 2, height / 2), (width, height)]], np.int32)
+
+
+def region_of_interest(img, vertices):
+    """Keep only the pixels of img inside the polygon(s) `vertices`."""
+    mask = np.zeros_like(img)
+    cv2.fillPoly(mask, vertices, 255)
+    return cv2.bitwise_and(img, mask)
+
+
+def hough_lines(edges, p):
+    """HoughLinesP with the lecture's arguments, as an (N, 4) int array (never None)."""
+    lines = cv2.HoughLinesP(edges, rho=p.hough_rho, theta=p.hough_theta,
+                            threshold=int(p.hough_threshold), lines=np.array([]),
+                            minLineLength=p.min_line_length, maxLineGap=p.max_line_gap)
+    # fixed: the lecture tests `lines != None`, which raises on an array; None means none found
+    if lines is None:
+        return np.empty((0, 4), np.int32)
+    return lines.reshape(-1, 4)
+
+
+@dataclass
+class SlopeSum:
+    """What the lecture computes from the segments."""
+
+    theta: float = 0.0  # sum of atan2(y2 - y1, x2 - x1) over all segments [rad]
+    value: float = 0.0  # left_slope / lc + right_slope / rc, logged only
+    left_slope: float = 0.0
+    left_count: int = 0
+    right_slope: float = 0.0
+    right_count: int = 0
+    vertical: int = 0  # segments with x1 == x2
+
+
+def slope_sum(lines, slope_min=0.5):
+    """theta and value exactly as the lecture's loop computes them."""
+    s = SlopeSum()
+    for x1, y1, x2, y2 in np.asarray(lines).reshape(-1, 4).tolist():
+        s.theta += math.atan2(y2 - y1, x2 - x1)
+        # fixed: the lecture divides by zero here. A vertical segment's slope sign depends only
+        # on endpoint order, so it counts in theta but joins neither slope group.
+        if x2 == x1:
+            s.vertical += 1
+            continue
+        slope = (y2 - y1) / (x2 - x1)
+        if math.fabs(slope) < slope_min:
+            continue
+        if slope <= 0:
+            s.left_slope += slope
+            s.left_count += 1
+        else:
+            s.right_slope += slope
+            s.right_count += 1
+    # the lecture's counters start at 1 and drop back by one if they moved: max(count, 1)
+    s.value = s.left_slope / max(s.left_count, 1) + s.right_slope / max(s.right_count, 1)
+    return s
+
+
+@dataclass
+class Detection:
+    """One frame through the pipeline."""
+
+    lines: np.ndarray  # (N, 4) segments x1, y1, x2, y2 in the undistorted image [px]
+    slopes: SlopeSum
+    image: np.ndarray  # the undistorted BGR frame the segments belong to
+    stages: dict = None  # intermediate images, only when asked for
+
+
+def detect(frame, camera, p, keep_stages=False):
+    """calibrate -> gray -> blur -> Canny -> ROI -> Hough -> slope sum."""
+    raw = as_bgr(frame)
+    image = calibration_camera(raw, camera)
+    # fixed: the lecture takes gray from the raw frame, so undistortion had no effect
+    gray = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    blurred = cv2.GaussianBlur(gray, (p.blur_kernel, p.blur_kernel), 0)
+    edged = cv2.Canny(blurred, p.canny_low, p.canny_high)
+    height, width = image.shape[:2]
+    if p.algorithm == '1.1':
+        masked = region_of_interest(edged, region_of_interest_vertices(width, height))
+    else:
+        masked = edged
+    lines = hough_lines(masked, p)
+    stages = None
+    if keep_stages:
+        stages = dict(raw=raw, undistorted=image, gray=gray, blurred=blurred, edges=edged,
+                      masked=masked)
+    return Detection(lines, slope_sum(lines, p.slope_min), image, stages)
+
+
+@dataclass(frozen=True)
+class Command:
+    decision: str  # left | right | straight | none
+    linear_x: float  # [m/s]
+    angular_z: float  # [rad/s]
+
+
+STOP = Command('none', 0.0, 0.0)
+
+
+class LectureRule:
+    """The lecture's bang-bang rule on theta, with its silent cases made explicit."""
+
+    name = 'lecture'
+
+    def __init__(self, p):
+        self.p = p
+
+    def __call__(self, detection):
+        p, theta = self.p, detection.slopes.theta
+        # fixed: with no segments the lecture published nothing; stop instead
+        if len(detection.lines) == 0:
+            return STOP
+        if theta > p.threshold:
+            return Command('left', p.turn_linear, p.turn_angular)
+        if theta < -p.threshold:
+            return Command('right', p.turn_linear, -p.turn_angular)
+        if abs(theta) < p.threshold:
+            return Command('straight', p.straight_linear, 0.0)
+        # fixed: |theta| == threshold matched no branch in the lecture; stop instead
+        return STOP
+
+
+def annotate(detection, command, p):
+    """The lecture's green segments on the undistorted frame, plus what was decided."""
+    image = detection.image.copy()
+    h, w = image.shape[:2]
+    if p.algorithm == '1.1':
+        cv2.polylines(image, region_of_interest_vertices(w, h), True, (0, 200, 255), 1)
+    for x1, y1, x2, y2 in detection.lines.tolist():
+        cv2.line(image, (x1, y1), (x2, y2), (0, 255, 0), 2)
+    s = detection.slopes
+    text = (f'{command.decision}  theta {s.theta:+.2f}  value {s.value:+.3f}  '
+            f'{len(detection.lines)} lines  v {command.linear_x:.2f} w {command.angular_z:+.2f}')
+    scale = max(0.3, w / 1400)
+    band = int(28 * scale / 0.45)
+    cv2.rectangle(image, (0, 0), (w, band), (0, 0, 0), -1)
+    cv2.putText(image, text, (5, int(band * 0.7)), cv2.FONT_HERSHEY_SIMPLEX, scale,
+                (255, 255, 255), 1, cv2.LINE_AA)
+    return image
+
+
+# ---------------------------------------------------------------- the node's loop
+
+def make_twist(twist_type, command):
+    thrust = twist_type()
+    thrust.linear.x = float(command.linear_x)
+    thrust.angular.z = float(command.angular_z)
+    return thrust
+
+
+class VideoSink:
+    """Annotated frames to a video file, at the loop rate; opened on the first frame."""
+
+    def __init__(self, path, fps):
+        self.path, self.fps = path, fps
+        self._writer, self._size = None, None
+
+    def write(self, image):
+        if self._writer is None:
+            self._size = (image.shape[1], image.shape[0])
+            fourcc = 'mp4v' if self.path.lower().endswith('.mp4') else 'MJPG'
+            self._writer = cv2.VideoWriter(self.path, cv2.VideoWriter_fourcc(*fourcc),
+                                           self.fps, self._size)
+            if not self._writer.isOpened():
+                raise OSError(f"cannot write video '{self.path}' (use .avi or .mp4)")
+        if (image.shape[1], image.shape[0]) != self._size:
+            image = cv2.resize(image, self._size)
+        self._writer.write(image)
+
+    def close(self):
+        if self._writer is not None:
+            self._writer.release()
+
+
+class Progress:
+    """A one-line progress display on stderr, redrawn at most twice a second."""
+
+    def __init__(self, total, enabled, stream=sys.stderr):
+        self.total, self.enabled, self.stream = total, enabled, stream
+        self.start = time.monotonic()
+        self._last = 0.0
+
+    def update(self, frames):
+        now = time.monotonic()
+        if not self.enabled or now - self._last < 0.5:
+            return
+        self._last = now
+        of = f'/{self.total}' if self.total else ''
+        fps = frames / max(now - self.start, 1e-9)
+        self.stream.write(f'\rframe {frames}{of}  {fps:.1f} frames/s ')
+        self.stream.flush()
+
+    def done(self):
+        if self.enabled and self._last:
+            self.stream.write('\n')
+
+
+class LaneFollower:
+    """Owns the publisher, the rate and the frame source; one command per loop iteration.
+
+    `ros` is the rospy module or a rospy_standin.StandInRospy; `twist_type` the matching Twist.
+    """
+
+    def __init__(self, ros, twist_type, source, params, camera, controller=None,
+                 decisions=None, video=None, show=False, progress=None, wait_for_base=0.0):
+        self.ros, self.twist_type, self.source = ros, twist_type, source
+        self.p, self.camera = params, camera
+        self.controller = controller or LectureRule(params)
+        self.decisions, self.video, self.show = decisions, video, show
+        self.progress = progress or Progress(None, False)
+        self.wait_for_base = wait_for_base
+        self.counts = dict(left=0, right=0, straight=0, none=0)
+        self.frames = 0
+        self.ended = None  # why the loop ended
+        self.stop_requested = None
+        self._lock = threading.Lock()
+        self._stopped = False
+        self._pub = ros.Publisher(TOPIC, twist_type, queue_size=1)
+        ros.on_shutdown(self.stop_robot)
+
+    def request_stop(self, reason):
+        """Ask the loop to end after this iteration (signal handlers call this)."""
+        if self.stop_requested is None:
+            self.stop_requested = reason
+
+    def _publish(self, command):
+        with self._lock:
+            if self._stopped:
+                return  # never move again once the stop has been sent
+            self._pub.publish(make_twist(self.twist_type, command))
+
+    def stop_robot(self):
+        """Publish a zero Twist once; later commands are refused. Safe from any thread."""
+        with self._lock:
+            if self._stopped:
+                return
+            self._stopped = True
+            try:
+                self._pub.publish(make_twist(self.twist_type, STOP))
+            except self.ros.ROSException as e:  # topic already closed by a ROS shutdown
+                self.ros.logwarn('could not publish the final stop: %s', e)
+
+    def step(self, frame, label):
+        """Process one frame and publish its command; returns the decision record."""
+        detection = detect(frame, self.camera, self.p)
+        command = self.controller(detection)
+        self._publish(command)
+        s = detection.slopes
+        record = dict(frame=self.frames, source=label, lines=int(len(detection.lines)),
+                      theta=round(s.theta, 6), value=round(s.value, 6),
+                      decision=command.decision, linear_x=command.linear_x,
+                      angular_z=command.angular_z, t=round(self.ros.get_time(), 6),
+                      left_count=s.left_count, right_count=s.right_count, vertical=s.vertical)
+        self.counts[command.decision] += 1
+        self.frames += 1
+        self.ros.loginfo('frame %d (%s): %d lines, theta %+.3f, value %+.3f -> %s '
+                         '(linear.x %.2f, angular.z %+.2f)', record['frame'], label,
+                         record['lines'], s.theta, s.value, command.decision,
+                         command.linear_x, command.angular_z)
+        if self.decisions is not None:
+            self.decisions.write(json.dumps(record) + '\n')
+            self.decisions.flush()
+        if self.video is not None or self.show:
+            self._picture(annotate(detection, command, self.p))
+        self.progress.update(self.frames)
+        return record
+
+    def _picture(self, image):
+        if self.video is not None:
+            self.video.write(image)
+        if self.show:
+            cv2.imshow('kobuki_lane', image)
+            if cv2.waitKey(1) & 0xFF == ord('q'):
+                self.request_stop('q pressed')
+
+    def _await_base(self):
+        deadline = time.monotonic() + self.wait_for_base
+        while self._pub.get_num_connections() == 0 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        if self._pub.get_num_connections() == 0 and self.wait_for_base > 0:
+            self.ros.logwarn('nothing subscribes to %s yet (is minimal.launch running?); '
+                             'publishing anyway', TOPIC)
+
+    def run(self):
+        """The lecture's main loop, at a steady rate, ending with the robot stopped."""
+        ros = self.ros
+        self._await_base()
+        rate = ros.Rate(self.p.rate)
+        try:
+            while self.ended is None:
+                if ros.is_shutdown():
+                    self.ended = 'ROS shutdown'
+                    break
+                if self.stop_requested:
+                    self.ended = self.stop_requested
+                    break
+                ok, frame, label = self.source.read()
+                if not ok:
+                    self.ended = 'camera lost' if self.source.live else 'end of input'
+                    break
+                self.step(frame, label)
+                # fixed: the lecture sleeps only in its straight branch; every branch keeps 4 Hz
+                rate.sleep()
+        except ros.ROSInterruptException:
+            self.ended = 'ROS shutdown'
+        finally:
+            self.stop_robot()
+            self.progress.done()
+        return self.ended
+
+
+# ---------------------------------------------------------------- wiring
+
+EXIT_STATUS = {'end of input': 0, 'ROS shutdown': 0, 'q pressed': 0, 'camera lost': 1,
+               'SIGINT': 130, 'SIGTERM': 143}
+
+
+def split_ros_args(argv):
+    """Separate rospy's name:=value arguments from ours; _name:=value are private params."""
+    import yaml
+
+    ours, private = [], {}
+    for arg in argv:
+        if ':=' in arg:
+            name, value = arg.split(':=', 1)
+            if name.startswith('_') and not name.startswith('__'):
+                private[name[1:]] = yaml.safe_load(value)
+        else:
+            ours.append(arg)
+    return ours, private
+
+
+def build_parser():
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    io = parser.add_argument_group('input and output')
+    io.add_argument('--source', default='0',
+                    help='camera index, video file, folder of images (name order), '
+                         "image pattern like 'frames/%%04d.png', or URL (default: 0)")
+    io.add_argument('--calibration', default='lecture',
+                    help="'lecture' (the lecture's camera matrix, default), 'none', or a ROS "
+                         'camera_info YAML path')
+    io.add_argument('--dry-run', action='store_true',
+                    help='no ROS: record the commands instead of publishing them; over files '
+                         'this runs as fast as it can')
+    io.add_argument('--realtime', action='store_true',
+                    help='in a dry run, keep the real loop rate instead of running flat out')
+    io.add_argument('--decisions', metavar='FILE',
+                    help='write one JSON object per frame (JSON Lines), flushed per frame')
+    io.add_argument('--video', metavar='FILE', help='write annotated frames (.avi or .mp4)')
+    io.add_argument('--show', action='store_true',
+                    help='show annotated frames in a window (needs a display and an OpenCV '
+                         'build with GUI); q quits')
+    io.add_argument('--progress', choices=('auto', 'on', 'off'), default='auto',
+                    help='progress line on stderr (auto: when stderr is a terminal)')
+    io.add_argument('--quiet', action='store_true', help='no per-frame log lines')
+    io.add_argument('--wait-for-base', type=float, default=2.0, metavar='SECONDS',
+                    help='on ROS, wait this long for a subscriber (the Kobuki base) before '
+                         'the first command (default: 2)')
+    tune = parser.add_argument_group("the lecture's settings (defaults are the lecture's)")
+    for f in dataclasses.fields(LaneParams):
+        meta = f.metadata
+        unit = f' [{meta["unit"]}]' if meta['unit'] else ''
+        kind = str if f.type is str or f.type == 'str' else (
+            int if f.type is int or f.type == 'int' else float)
+        tune.add_argument('--' + f.name.replace('_', '-'), dest=f.name, type=kind, default=None,
+                          choices=meta['choices'], metavar=None if meta['choices'] else 'X',
+                          help=f'{meta["help"]}{unit}; default {f.default:g}'
+                          if kind is not str else f'{meta["help"]}; default {f.default}')
+    return parser
+
+
+def resolve_params(args, get_param):
+    """Flag given > private ROS parameter > the lecture's default; ValueError if out of range."""
+    values = {}
+    for f in dataclasses.fields(LaneParams):
+        flag = getattr(args, f.name)
+        value = flag if flag is not None else get_param('~' + f.name, f.default)
+        if f.type in (float, 'float') and isinstance(value, (int, float)):
+            value = float(value)
+        elif f.type in (str, 'str'):
+            value = str(value)
+        values[f.name] = value
+    return LaneParams(**values).validate()
+
+
+def check_output(path, what):
+    """Refuse an output path whose folder is missing or read-only before the run starts."""
+    folder = os.path.dirname(os.path.abspath(path))
+    problem = None
+    if not os.path.isdir(folder):
+        problem = 'does not exist'
+    elif not os.access(folder, os.W_OK):
+        problem = 'is not writable'
+    if problem:
+        raise SystemExit(f"kobuki_lane.py: error: {what} '{path}': folder '{folder}' {problem}")
+
+
+def master_online(timeout=3.0):
+    """True if the ROS master at ROS_MASTER_URI answers within `timeout` seconds."""
+    import rosgraph
+
+    old = socket.getdefaulttimeout()
+    socket.setdefaulttimeout(timeout)
+    try:
+        return rosgraph.is_master_online()
+    finally:
+        socket.setdefaulttimeout(old)
+
+
+def connect_ros(private):
+    """The real rospy and Twist, with the node registered; SystemExit(2) if no master."""
+    try:
+        import rospy
+        from geometry_msgs.msg import Twist
+    except ImportError as e:
+        raise SystemExit(f'kobuki_lane.py: error: ROS 1 is not importable ({e}); install Debian'
+                         "'s python3-rospy and python3-geometry-msgs, or use --dry-run") from None
+    uri = os.environ.get('ROS_MASTER_URI', 'http://localhost:11311 (ROS_MASTER_URI unset)')
+    if not master_online():
+        print(f'kobuki_lane.py: error: no ROS master answers at {uri}; start roscore '
+              '(or roslaunch kobuki_node minimal.launch), or use --dry-run', file=sys.stderr)
+        raise SystemExit(2)
+    # our own signal handlers send the stop before rospy is told to shut down
+    rospy.init_node('kobuki_lane', disable_signals=True)
+    return rospy, Twist
+
+
+def install_signal_handlers(follower):
+    def handler(signum, _frame):
+        name = signal.Signals(signum).name
+        follower.request_stop(name)
+        # a second signal of the same kind is not ignored
+        signal.signal(signum, signal.SIG_DFL if signum == signal.SIGTERM
+                      else signal.default_int_handler)
+
+    signal.signal(signal.SIGINT, handler)
+    signal.signal(signal.SIGTERM, handler)
+
+
+def check_show():
+    if not os.environ.get('DISPLAY') and not os.environ.get('WAYLAND_DISPLAY'):
+        raise SystemExit('kobuki_lane.py: error: --show needs a display (DISPLAY is not set); '
+                         'use --video FILE instead')
+    try:
+        cv2.namedWindow('kobuki_lane')
+    except cv2.error:
+        raise SystemExit('kobuki_lane.py: error: --show needs an OpenCV build with GUI support '
+                         '(pip install opencv-python instead of opencv-python-headless); use '
+                         '--video FILE instead') from None
+
+
+def summary(follower, elapsed):
+    c = follower.counts
+    fps = follower.frames / elapsed if elapsed > 0 else 0.0
+    return (f'kobuki_lane: {follower.frames} frames ({follower.source.skipped} skipped) in '
+            f'{elapsed:.2f} s, {fps:.1f} frames/s: left {c["left"]}, right {c["right"]}, '
+            f'straight {c["straight"]}, none {c["none"]}; ended: {follower.ended}')
+
+
+def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
+    ours, private = split_ros_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(ours)
+    for path, what in ((args.decisions, '--decisions'), (args.video, '--video')):
+        if path:
+            check_output(path, what)
+    if args.show:
+        check_show()
+    try:
+        camera = load_calibration(args.calibration)
+    except CalibrationError as e:
+        parser.error(str(e))
+
+    if args.dry_run:
+        from rospy_standin import SimClock, StandInRospy, Twist, WallClock
+
+        twist_type = Twist
+        clock_live = args.realtime or args.source.isdigit() or '://' in args.source
+        ros = StandInRospy(WallClock() if clock_live else SimClock(), params=private,
+                           quiet=args.quiet)
+        ros.init_node('kobuki_lane')
+    else:
+        ros, twist_type = connect_ros(private)
+    try:
+        params = resolve_params(args, ros.get_param)
+    except (ValueError, TypeError) as e:
+        parser.error(str(e))
+    try:
+        source = open_source(args.source, warn=ros.logwarn)
+    except SourceError as e:
+        print(f'kobuki_lane.py: error: {e}', file=sys.stderr)
+        return 2
+
+    show_progress = args.progress == 'on' or (args.progress == 'auto' and sys.stderr.isatty())
+    decisions = open(args.decisions, 'w', encoding='utf-8') if args.decisions else None
+    video = VideoSink(args.video, params.rate) if args.video else None
+    follower = LaneFollower(ros, twist_type, source, params, camera, decisions=decisions,
+                            video=video, show=args.show,
+                            progress=Progress(source.total, show_progress),
+                            wait_for_base=0.0 if args.dry_run else args.wait_for_base)
+    install_signal_handlers(follower)
+    ros.loginfo('kobuki_lane: source %s, algorithm %s, calibration %s, %.1f Hz on %s%s',
+                source.name, params.algorithm, args.calibration, params.rate, TOPIC,
+                ' (dry run)' if args.dry_run else '')
+    start = time.monotonic()
+    try:
+        ended = follower.run()
+    finally:
+        source.release()
+        for sink in (decisions, video):
+            if sink is not None:
+                sink.close()
+        if not args.dry_run:
+            time.sleep(0.3)  # let rospy's sender thread deliver the final zero Twist
+            ros.signal_shutdown(follower.ended or 'exception')
+    print(summary(follower, time.monotonic() - start), file=sys.stderr)
+    if ended == 'camera lost':
+        print(f"kobuki_lane.py: error: camera lost: no frame from '{source.name}'",
+              file=sys.stderr)
+    return EXIT_STATUS.get(ended, 0)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,182 @@
+"""A thin stand-in for rospy and geometry_msgs/Twist, so the node's loop runs with no ROS at all.
+
+It offers only the calls kobuki_lane.py makes (init_node, Publisher, Rate, is_shutdown,
+on_shutdown, signal_shutdown, get_param, get_time, loginfo/logwarn/logerr,
+ROSInterruptException) with rospy's semantics, on a clock you choose:
+
+    SimClock()   simulated time: Rate.sleep() advances it instantly (tests, fast dry runs)
+    WallClock()  real time: Rate.sleep() really sleeps (dry runs with --realtime)
+
+Published messages are recorded in `StandInRospy.published` as (time_s, topic, message)
+instead of being sent. tests/test_ros_real.py runs the same loop against Debian's real rospy
+and checks that what a real subscriber receives matches, so the two cannot drift apart.
+"""
+
+import sys
+import time
+from dataclasses import dataclass, field
+
+
+@dataclass
+class Vector3:
+    x: float = 0.0
+    y: float = 0.0
+    z: float = 0.0
+
+
+@dataclass
+class Twist:
+    """geometry_msgs/Twist: linear [m/s] and angular [rad/s] velocity."""
+
+    linear: Vector3 = field(default_factory=Vector3)
+    angular: Vector3 = field(default_factory=Vector3)
+
+
+class ROSException(Exception):
+    """rospy.ROSException: e.g. publishing to a topic closed by shutdown."""
+
+
+class ROSInterruptException(ROSException, KeyboardInterrupt):
+    """Raised by Rate.sleep() once shutdown has been signalled, as in rospy."""
+
+
+class SimClock:
+    """Simulated time in seconds; sleeping advances it at once."""
+
+    def __init__(self, start=0.0):
+        self.t = start
+
+    def now(self):
+        return self.t
+
+    def sleep(self, seconds):
+        if seconds > 0:
+            self.t += seconds
+
+
+class WallClock:
+    """Real monotonic time."""
+
+    def now(self):
+        return time.monotonic()
+
+    def sleep(self, seconds):
+        if seconds > 0:
+            time.sleep(seconds)
+
+
+class Rate:
+    """rospy.Rate: sleep so that a loop runs at `hz`, catching up after a late iteration."""
+
+    def __init__(self, ros, hz):
+        self._ros = ros
+        self.sleep_dur = 1.0 / hz
+        self.last_time = ros.clock.now()
+
+    def remaining(self):
+        return self.last_time + self.sleep_dur - self._ros.clock.now()
+
+    def sleep(self):
+        if self._ros.is_shutdown():
+            raise ROSInterruptException('ROS shutdown request')
+        now = self._ros.clock.now()
+        self._ros.clock.sleep(self.last_time + self.sleep_dur - now)
+        self.last_time += self.sleep_dur
+        # rospy resets its schedule when more than two periods behind
+        if now - self.last_time > self.sleep_dur * 2:
+            self.last_time = now
+
+
+class Publisher:
+    def __init__(self, ros, topic, data_class, queue_size):
+        if queue_size is None:
+            raise ValueError('queue_size must be given, as rospy warns')
+        self._ros = ros
+        self.name = topic
+        self.data_class = data_class
+        self.queue_size = queue_size
+
+    def publish(self, msg):
+        if self._ros.is_shutdown():
+            raise ROSException('publish() to a closed topic')
+        self._ros.published.append((self._ros.clock.now(), self.name, msg))
+
+    def get_num_connections(self):
+        return 1  # the recorder always listens
+
+    def unregister(self):
+        pass
+
+
+class StandInRospy:
+    """An object with the rospy module's API, for one headless run."""
+
+    ROSException = ROSException
+    ROSInterruptException = ROSInterruptException
+
+    def __init__(self, clock=None, params=None, quiet=False):
+        self.clock = clock if clock is not None else SimClock()
+        self.params = dict(params or {})
+        self.published = []
+        self.log_lines = []
+        self._quiet = quiet
+        self._shutdown_reason = None
+        self._hooks = []
+        self.node_name = None
+
+    # node life cycle
+    def init_node(self, name, anonymous=False, disable_signals=False):
+        self.node_name = '/' + name
+
+    def is_shutdown(self):
+        return self._shutdown_reason is not None
+
+    def on_shutdown(self, hook):
+        self._hooks.append(hook)
+
+    def signal_shutdown(self, reason):
+        if self._shutdown_reason is not None:
+            return
+        # hooks run before the flag is raised, as in rospy, so they can still publish
+        for hook in self._hooks:
+            hook()
+        self._hooks.clear()
+        self._shutdown_reason = reason
+
+    # communication and time
+    def Publisher(self, topic, data_class, queue_size=None):
+        return Publisher(self, topic, data_class, queue_size)
+
+    def Rate(self, hz):
+        return Rate(self, hz)
+
+    def get_time(self):
+        return self.clock.now()
+
+    def sleep(self, seconds):
+        self.clock.sleep(seconds)
+
+    def get_param(self, name, default=None):
+        key = name.lstrip('~')
+        if key in self.params:
+            return self.params[key]
+        if default is None:
+            raise KeyError(name)
+        return default
+
+    # logging, formatted like rospy's: INFO to stdout (unless quiet), WARN and ERROR to stderr
+    def _emit(self, level, msg, args):
+        text = msg % args if args else msg
+        self.log_lines.append((level, text))
+        stream = sys.stdout if level == 'INFO' else sys.stderr
+        if level != 'INFO' or not self._quiet:
+            print(f'[{level}] [{self.clock.now():.3f}]: {text}', file=stream, flush=True)
+
+    def loginfo(self, msg, *args):
+        self._emit('INFO', msg, args)
+
+    def logwarn(self, msg, *args):
+        self._emit('WARN', msg, args)
+
+    def logerr(self, msg, *args):
+        self._emit('ERROR', msg, args)

@@ -1,0 +1,39 @@
+#!/usr/bin/env bash
+# Set up everything kobuki_lane needs on Debian 12 or Ubuntu 22.04+, then run one job:
+#     bash setup.sh demo    dry run on samples/track: prints decisions, writes out/annotated.avi
+#     bash setup.sh test    the whole test suite (starts a real roscore)
+# Installs Debian's ROS 1 packages with apt (sudo when not root), makes .venv from
+# /usr/bin/python3 with --system-site-packages (so rospy is visible) and pip-installs the
+# pinned requirements. Safe to run again: it only installs what is missing.
+set -euo pipefail
+cd "$(dirname "$0")"
+job="${1:-}"
+case "$job" in demo|test) ;; *) echo "usage: bash setup.sh demo|test" >&2; exit 2 ;; esac
+
+apt_packages="python3-venv python3-yaml python3-rospy python3-geometry-msgs python3-sensor-msgs python3-rosbag ros-core"
+missing=""
+for p in $apt_packages; do
+  dpkg -s "$p" >/dev/null 2>&1 || missing="$missing $p"
+done
+if [ -n "$missing" ]; then
+  sudo=""
+  [ "$(id -u)" -eq 0 ] || sudo="sudo"
+  echo "setup.sh: installing Debian packages:$missing" >&2
+  $sudo apt-get update -q
+  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -q --no-install-recommends $missing
+fi
+
+if [ ! -x .venv/bin/python ]; then
+  /usr/bin/python3 -m venv --system-site-packages .venv
+fi
+requirements=requirements.txt
+[ "$job" = test ] && requirements=requirements-dev.txt
+.venv/bin/python -m pip install -q --disable-pip-version-check -r "$requirements"
+
+if [ "$job" = demo ]; then
+  mkdir -p out
+  exec .venv/bin/python kobuki_lane.py --source samples/track --dry-run --calibration lecture \
+    --decisions out/decisions.jsonl --video out/annotated.avi
+else
+  exec .venv/bin/python -m pytest "${@:2}"
+fi

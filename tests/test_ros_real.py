@@ -1,0 +1,113 @@
+"""The node against Debian's real ROS 1: roscore, rospy subscriber, rostopic-free checks, roslaunch.
+
+These tests never skip: without ROS they fail, because the stand-in must not drift from rospy.
+"""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+from conftest import REPO, free_port
+
+NODE = os.path.join(REPO, 'kobuki_lane.py')
+
+
+def read_jsonl(path):
+    with open(path, encoding='utf-8') as f:
+        return [json.loads(line) for line in f]
+
+
+def run_node(roscore, args, timeout=60):
+    return subprocess.run([sys.executable, NODE, *args], env=roscore['env'], cwd=REPO,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def assert_matches_decisions(messages, records):
+    """One Twist per frame with the rule's values, in order, then a final zero."""
+    assert len(messages) == len(records) + 1, (len(messages), len(records))
+    for (_, x, z), rec in zip(messages, records, strict=False):
+        assert abs(x - rec['linear_x']) < 1e-9 and abs(z - rec['angular_z']) < 1e-9
+    _, x, z = messages[-1]
+    assert x == 0.0 and z == 0.0
+
+
+def test_node_publishes_the_rule_at_4hz_and_ends_with_a_stop(roscore, twist_recorder,
+                                                             few_frames, tmp_path):
+    decisions = tmp_path / 'd.jsonl'
+    proc = run_node(roscore, ['--source', str(few_frames), '--decisions', str(decisions)])
+    assert proc.returncode == 0, proc.stderr
+    records = read_jsonl(decisions)
+    assert len(records) == 8
+    messages = twist_recorder.wait_for(len(records) + 1, timeout=5)
+    assert_matches_decisions(messages, records)
+    # frame commands arrive at the loop rate: 4 Hz, within 10 %
+    times = [t for t, _, _ in messages[:-1]]
+    rate = (len(times) - 1) / (times[-1] - times[0])
+    assert 3.6 < rate < 4.4, rate
+    assert 'ended: end of input' in proc.stderr
+
+
+def test_sigint_stops_the_robot_before_exit(roscore, twist_recorder, tmp_path):
+    # a long input, interrupted after a few commands, as Ctrl-C would
+    proc = subprocess.Popen([sys.executable, NODE, '--source', os.path.join(REPO, 'samples',
+                                                                            'track')],
+                            env=roscore['env'], cwd=REPO, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)
+    twist_recorder.wait_for(4, timeout=20)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=20)
+    assert proc.returncode == 130, err
+    messages = twist_recorder.wait_for(10**6, timeout=1.0)
+    assert 4 <= len(messages) < 28
+    assert messages[-1][1:] == (0.0, 0.0)
+    assert 'ended: SIGINT' in err
+
+
+def test_sigterm_stops_the_robot_before_exit(roscore, twist_recorder):
+    proc = subprocess.Popen([sys.executable, NODE, '--source', os.path.join(REPO, 'samples',
+                                                                            'track')],
+                            env=roscore['env'], cwd=REPO, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)
+    twist_recorder.wait_for(3, timeout=20)
+    proc.terminate()
+    _, err = proc.communicate(timeout=20)
+    assert proc.returncode == 143, err
+    messages = twist_recorder.wait_for(10**6, timeout=1.0)
+    assert messages[-1][1:] == (0.0, 0.0)
+
+
+def test_no_master_exits_2_without_hanging(roscore, tmp_path):
+    env = dict(roscore['env'], ROS_MASTER_URI=f'http://localhost:{free_port()}')
+    start = time.monotonic()
+    proc = subprocess.run([sys.executable, NODE, '--source', str(tmp_path)], env=env, cwd=REPO,
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2
+    assert 'no ROS master answers at http://localhost:' in proc.stderr
+    assert 'Traceback' not in proc.stderr
+    assert time.monotonic() - start < 15
+
+
+def test_roslaunch_starts_the_node_with_its_launch_parameters(roscore, twist_recorder,
+                                                              few_frames, tmp_path):
+    decisions = tmp_path / 'launched.jsonl'
+    # threshold 0.5 in the launch file makes the rule turn where the default goes straight
+    cmd = ['roslaunch', 'kobuki_lane', 'kobuki_lane.launch', f'source:={few_frames}',
+           'threshold:=0.5', 'turn_angular:=0.3',
+           f'extra_args:=--decisions {decisions} --wait-for-base 5']
+    proc = subprocess.run(cmd, env=roscore['env'], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=90)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    records = read_jsonl(decisions)
+    assert len(records) == 8
+    messages = twist_recorder.wait_for(len(records) + 1, timeout=5)
+    assert_matches_decisions(messages, records)
+    turns = [r for r in records if r['decision'] in ('left', 'right')]
+    assert turns, 'threshold 0.5 from the launch file should make some frames turn'
+    for r in records:
+        if r['decision'] in ('left', 'right'):
+            assert abs(r['theta']) > 0.5 and abs(r['angular_z']) == 0.3
+        elif r['decision'] == 'straight':
+            assert abs(r['theta']) < 0.5
