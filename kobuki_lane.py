@@ -512,6 +512,12 @@ def resolve_params(args, get_param):
     return LaneParams(**values).validate()
 
 
+def fail(message):
+    """A mistake the user can fix: say what it was and exit with status 2, no traceback."""
+    print(f'kobuki_lane.py: error: {message}', file=sys.stderr)
+    raise SystemExit(2)
+
+
 def check_output(path, what):
     """Refuse an output path whose folder is missing or read-only before the run starts."""
     folder = os.path.dirname(os.path.abspath(path))
@@ -521,7 +527,7 @@ def check_output(path, what):
     elif not os.access(folder, os.W_OK):
         problem = 'is not writable'
     if problem:
-        raise SystemExit(f"kobuki_lane.py: error: {what} '{path}': folder '{folder}' {problem}")
+        fail(f"{what} '{path}': folder '{folder}' {problem}")
 
 
 def master_online(timeout=3.0):
@@ -537,18 +543,17 @@ def master_online(timeout=3.0):
 
 
 def connect_ros(private):
-    """The real rospy and Twist, with the node registered; SystemExit(2) if no master."""
+    """The real rospy and Twist, with the node registered; exit status 2 if no master."""
     try:
         import rospy
         from geometry_msgs.msg import Twist
     except ImportError as e:
-        raise SystemExit(f'kobuki_lane.py: error: ROS 1 is not importable ({e}); install Debian'
-                         "'s python3-rospy and python3-geometry-msgs, or use --dry-run") from None
+        fail(f"ROS 1 is not importable ({e}); install Debian's python3-rospy and "
+             'python3-geometry-msgs, or use --dry-run')
     uri = os.environ.get('ROS_MASTER_URI', 'http://localhost:11311 (ROS_MASTER_URI unset)')
     if not master_online():
-        print(f'kobuki_lane.py: error: no ROS master answers at {uri}; start roscore '
-              '(or roslaunch kobuki_node minimal.launch), or use --dry-run', file=sys.stderr)
-        raise SystemExit(2)
+        fail(f'no ROS master answers at {uri}; start roscore (or roslaunch kobuki_node '
+             'minimal.launch), or use --dry-run')
     # our own signal handlers send the stop before rospy is told to shut down
     rospy.init_node('kobuki_lane', disable_signals=True)
     return rospy, Twist
@@ -568,14 +573,12 @@ def install_signal_handlers(follower):
 
 def check_show():
     if not os.environ.get('DISPLAY') and not os.environ.get('WAYLAND_DISPLAY'):
-        raise SystemExit('kobuki_lane.py: error: --show needs a display (DISPLAY is not set); '
-                         'use --video FILE instead')
+        fail('--show needs a display (DISPLAY is not set); use --video FILE instead')
     try:
         cv2.namedWindow('kobuki_lane')
     except cv2.error:
-        raise SystemExit('kobuki_lane.py: error: --show needs an OpenCV build with GUI support '
-                         '(pip install opencv-python instead of opencv-python-headless); use '
-                         '--video FILE instead') from None
+        fail('--show needs an OpenCV build with GUI support (pip install opencv-python '
+             'instead of opencv-python-headless); use --video FILE instead')
 
 
 def summary(follower, elapsed):
@@ -618,8 +621,7 @@ def main(argv=None):
     try:
         source = open_source(args.source, warn=ros.logwarn)
     except SourceError as e:
-        print(f'kobuki_lane.py: error: {e}', file=sys.stderr)
-        return 2
+        fail(str(e))
 
     show_progress = args.progress == 'on' or (args.progress == 'auto' and sys.stderr.isatty())
     decisions = open(args.decisions, 'w', encoding='utf-8') if args.decisions else None

@@ -1,0 +1,213 @@
+"""kobuki_lane.py from the command line: dry runs, sources, outputs, bad input."""
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+import cv2
+import numpy as np
+import pytest
+from conftest import REPO, SAMPLES
+
+import kobuki_lane
+from calibration import LECTURE_CAMERA
+from kobuki_lane import LaneParams, LectureRule, detect, main
+
+NODE = os.path.join(REPO, 'kobuki_lane.py')
+KEYS = ('frame', 'source', 'lines', 'theta', 'value', 'decision', 'linear_x', 'angular_z')
+
+
+def read_jsonl(path):
+    with open(path, encoding='utf-8') as f:
+        return [json.loads(line) for line in f]
+
+
+def cli(*args, timeout=60, env=None):
+    return subprocess.run([sys.executable, NODE, *args], cwd=REPO, capture_output=True,
+                          text=True, timeout=timeout, env=env)
+
+
+def expected(record, params=LaneParams()):
+    """What the lecture's rule says for a record's theta and segment count."""
+    if record['lines'] == 0 or abs(record['theta']) == params.threshold:
+        return 'none'
+    if record['theta'] > params.threshold:
+        return 'left'
+    return 'right' if record['theta'] < -params.threshold else 'straight'
+
+
+def test_dry_run_on_the_samples_writes_the_rules_decisions(tmp_path):
+    out = tmp_path / 'd.jsonl'
+    assert main(['--source', SAMPLES, '--dry-run', '--calibration', 'lecture',
+                 '--decisions', str(out), '--quiet']) == 0
+    records = read_jsonl(out)
+    names = sorted(os.listdir(SAMPLES))
+    assert [r['source'] for r in records] == names
+    p = LaneParams()
+    for r in records[::5]:  # recompute from the frame itself
+        d = detect(cv2.imread(os.path.join(SAMPLES, r['source'])), LECTURE_CAMERA, p)
+        assert r['lines'] == len(d.lines)
+        assert r['theta'] == pytest.approx(d.slopes.theta, abs=1e-6)
+        assert r['decision'] == LectureRule(p)(d).decision
+    for r in records:
+        assert all(k in r for k in KEYS)
+        assert r['decision'] == expected(r)
+
+
+def test_calibration_none_on_any_folder(tmp_path):
+    folder = tmp_path / 'imgs'
+    folder.mkdir()
+    img = np.full((240, 320, 3), 80, np.uint8)
+    cv2.line(img, (20, 239), (150, 125), (255, 255, 255), 6)
+    for i in range(3):
+        cv2.imwrite(str(folder / f'{i}.png'), img)
+    out = tmp_path / 'd.jsonl'
+    proc = cli('--source', str(folder), '--dry-run', '--calibration', 'none', '--decisions',
+               str(out))
+    assert proc.returncode == 0, proc.stderr
+    records = read_jsonl(out)
+    assert len(records) == 3 and all(r['decision'] == expected(r) for r in records)
+    assert 'frame 0 (0.png)' in proc.stdout  # decisions are printed
+    assert 'kobuki_lane: 3 frames (0 skipped)' in proc.stderr
+
+
+def test_video_pattern_and_single_image_sources(tmp_path):
+    frames = [cv2.imread(os.path.join(SAMPLES, n)) for n in sorted(os.listdir(SAMPLES))[:5]]
+    for i, f in enumerate(frames):
+        cv2.imwrite(str(tmp_path / f'f{i:04d}.png'), f)
+    video = tmp_path / 'clip.avi'
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*'MJPG'), 4, (640, 480))
+    for f in frames:
+        writer.write(f)
+    writer.release()
+    for source, n in ((str(video), 5), (str(tmp_path / 'f%04d.png'), 5),
+                      (str(tmp_path / 'f0002.png'), 1)):
+        out = tmp_path / 'd.jsonl'
+        assert main(['--source', source, '--dry-run', '--decisions', str(out), '--quiet']) == 0
+        records = read_jsonl(out)
+        assert len(records) == n, source
+        assert all(r['decision'] == expected(r) for r in records)
+
+
+def test_annotated_video_has_one_frame_per_decision(tmp_path):
+    video = tmp_path / 'a.avi'
+    assert main(['--source', SAMPLES, '--dry-run', '--video', str(video), '--quiet']) == 0
+    cap = cv2.VideoCapture(str(video))
+    assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == len(os.listdir(SAMPLES))
+    ok, frame = cap.read()
+    assert ok and frame.shape == (480, 640, 3)
+    # green segments were drawn
+    green = (frame[:, :, 1] > 200) & (frame[:, :, 0] < 80) & (frame[:, :, 2] < 80)
+    assert green.sum() > 200
+
+
+def test_unreadable_files_are_skipped_and_counted(tmp_path):
+    shutil.copy(os.path.join(SAMPLES, '000_A.jpg'), tmp_path / 'a.jpg')
+    (tmp_path / 'b.jpg').write_bytes(b'not a jpeg')
+    (tmp_path / 'c.png').write_bytes(b'')
+    proc = cli('--source', str(tmp_path), '--dry-run', '--quiet')
+    assert proc.returncode == 0
+    assert 'skipped' in proc.stderr and 'b.jpg' in proc.stderr
+    assert '1 frames (2 skipped)' in proc.stderr
+
+
+@pytest.mark.parametrize('frame', [np.zeros((1, 1), np.uint8),
+                                   np.full((100, 37, 4), 200, np.uint8),
+                                   np.full((300, 500), 40000, np.uint16)])
+def test_odd_images_are_processed(tmp_path, frame):
+    cv2.imwrite(str(tmp_path / 'x.png'), frame)
+    out = tmp_path / 'd.jsonl'
+    assert main(['--source', str(tmp_path / 'x.png'), '--dry-run', '--decisions', str(out),
+                 '--quiet']) == 0
+    assert read_jsonl(out)[0]['decision'] in ('left', 'right', 'straight', 'none')
+
+
+@pytest.mark.parametrize('source, message', [
+    ('/no/such/folder', "cannot open '/no/such/folder': no such file or folder"),
+    ('empty_dir', 'has no image files'),
+    ('zero.avi', 'the file is empty'),
+    ('junk.avi', 'cannot open'),
+    ('bad.png', 'not a readable image'),
+])
+def test_a_source_that_cannot_be_opened_exits_2_naming_it(tmp_path, source, message):
+    (tmp_path / 'empty_dir').mkdir()
+    (tmp_path / 'zero.avi').write_bytes(b'')
+    (tmp_path / 'junk.avi').write_bytes(b'\x00garbage' * 100)
+    (tmp_path / 'bad.png').write_bytes(b'\x89PNG broken')
+    spec = source if source.startswith('/') else str(tmp_path / source)
+    proc = cli('--source', spec, '--dry-run')
+    assert proc.returncode == 2
+    assert message in proc.stderr and 'Traceback' not in proc.stderr
+
+
+@pytest.mark.parametrize('args', [['--rate', '0'], ['--rate', '-4'], ['--threshold', 'nan'],
+                                  ['--threshold', 'inf'], ['--algorithm', '2.0'],
+                                  ['--hough-threshold', 'many'], ['--blur-kernel', '4'],
+                                  ['--calibration', 'missing.yaml'], ['--progress', 'maybe']])
+def test_bad_flag_values_are_argparse_errors(args):
+    proc = cli('--source', SAMPLES, '--dry-run', *args)
+    assert proc.returncode == 2
+    assert 'error:' in proc.stderr and 'Traceback' not in proc.stderr
+
+
+def test_outputs_in_a_missing_folder_are_refused_before_the_run(tmp_path):
+    proc = cli('--source', SAMPLES, '--dry-run', '--decisions', str(tmp_path / 'no' / 'd.jsonl'))
+    assert proc.returncode == 2 and 'does not exist' in proc.stderr
+    assert 'frame 0' not in proc.stdout
+
+
+def test_show_without_a_display_is_a_clear_error():
+    env = {k: v for k, v in os.environ.items() if k not in ('DISPLAY', 'WAYLAND_DISPLAY')}
+    proc = cli('--source', SAMPLES, '--dry-run', '--show', env=env)
+    assert proc.returncode == 2 and '--show needs a display' in proc.stderr
+
+
+def test_private_params_and_flag_precedence(tmp_path):
+    out = tmp_path / 'd.jsonl'
+    # _threshold:=0.3 as a ROS private parameter makes curves turn ...
+    assert main(['--source', SAMPLES, '--dry-run', '_threshold:=0.3', '--decisions', str(out),
+                 '--quiet']) == 0
+    with_param = read_jsonl(out)
+    assert {r['decision'] for r in with_param} >= {'left', 'right'}
+    # ... and a flag wins over the parameter
+    assert main(['--source', SAMPLES, '--dry-run', '_threshold:=0.3', '--threshold', '6',
+                 '--decisions', str(out), '--quiet']) == 0
+    assert all(r['decision'] == expected(r) for r in read_jsonl(out))
+
+
+def test_algorithm_1_0_is_the_unmasked_pipeline(tmp_path):
+    out10, out11 = tmp_path / '10.jsonl', tmp_path / '11.jsonl'
+    main(['--source', SAMPLES, '--dry-run', '--algorithm', '1.0', '--decisions', str(out10),
+          '--quiet'])
+    main(['--source', SAMPLES, '--dry-run', '--decisions', str(out11), '--quiet'])
+    lines10 = sum(r['lines'] for r in read_jsonl(out10))
+    lines11 = sum(r['lines'] for r in read_jsonl(out11))
+    assert lines10 > 2 * lines11
+
+
+def test_sigterm_in_a_realtime_dry_run_leaves_complete_outputs(tmp_path):
+    out = tmp_path / 'd.jsonl'
+    proc = subprocess.Popen([sys.executable, NODE, '--source', SAMPLES, '--dry-run',
+                             '--realtime', '--decisions', str(out), '--quiet'], cwd=REPO,
+                            stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 20
+    while (not out.exists() or len(out.read_text().splitlines()) < 3) and \
+            time.monotonic() < deadline:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=20)
+    assert proc.returncode == 143
+    records = read_jsonl(out)  # every line is whole JSON
+    assert 3 <= len(records) < len(os.listdir(SAMPLES))
+    assert 'ended: SIGTERM' in err
+
+
+def test_help_explains_the_defaults():
+    text = kobuki_lane.build_parser().format_help()
+    for phrase in ('--source', 'lecture: 85', 'lecture: threshold = 6', '[m/s]',
+                   'rospy.Rate(4)', 'exit status'):
+        assert phrase in text
