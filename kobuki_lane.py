@@ -306,11 +306,13 @@ class Progress:
     def __init__(self, total, enabled, stream=sys.stderr):
         self.total, self.enabled, self.stream = total, enabled, stream
         self.start = time.monotonic()
+        self.frames = 0
         self._last = 0.0
 
-    def update(self, frames):
+    def update(self, frames, final=False):
         now = time.monotonic()
-        if not self.enabled or now - self._last < 0.5:
+        self.frames = frames
+        if not self.enabled or (now - self._last < 0.5 and not final):
             return
         self._last = now
         of = f'/{self.total}' if self.total else ''
@@ -319,7 +321,8 @@ class Progress:
         self.stream.flush()
 
     def done(self):
-        if self.enabled and self._last:
+        if self.enabled:
+            self.update(self.frames, final=True)
             self.stream.write('\n')
 
 

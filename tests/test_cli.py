@@ -211,3 +211,11 @@ def test_help_explains_the_defaults():
     for phrase in ('--source', 'lecture: 85', 'lecture: threshold = 6', '[m/s]',
                    'rospy.Rate(4)', 'exit status'):
         assert phrase in text
+
+
+def test_progress_line_on_request():
+    proc = cli('--source', SAMPLES, '--dry-run', '--quiet', '--progress', 'on')
+    n = len(os.listdir(SAMPLES))
+    assert f'frame {n}/{n}' in proc.stderr
+    quiet = cli('--source', SAMPLES, '--dry-run', '--quiet', '--progress', 'off')
+    assert 'frames/s \n' not in quiet.stderr.split('kobuki_lane:')[0]
