@@ -435,6 +435,7 @@ class LaneFollower:
         except ros.ROSInterruptException:
             self.ended = 'ROS shutdown'
         finally:
+            # fixed: nothing stopped the robot when the lecture's loop ended; always stop
             self.stop_robot()
             self.progress.done()
         return self.ended
