@@ -97,10 +97,56 @@ class Track:
         return c[:, :2] + half * normal, c[:, :2] - half * normal
 
 
+def camera_axes(pitch_deg):
+    """The camera's x (right), y (down) and z (optical axis) in the robot frame."""
+    p = math.radians(pitch_deg)
+    return (np.array([0.0, -1.0, 0.0]), np.array([-math.sin(p), 0.0, -math.cos(p)]),
+            np.array([math.cos(p), 0.0, -math.sin(p)]))
+
+
+def rays_to_floor(xn, yn, mounting):
+    """Normalised image coordinates to floor points (x, y) in the robot frame.
+
+    Returns x, y and a mask of the rays that point down to the floor.
+    """
+    x_cam, y_cam, z_cam = camera_axes(mounting.pitch_deg)
+    xn, yn = np.asarray(xn, float)[..., None], np.asarray(yn, float)[..., None]
+    d = xn * x_cam + yn * y_cam + z_cam
+    down = -d[..., 2]
+    ok = down > 1e-9
+    t = mounting.height / np.where(ok, down, 1.0)
+    return mounting.forward + t * d[..., 0], t * d[..., 1], ok
+
+
+def pixels_to_floor(uv, matrix, mounting):
+    """Pixels of an undistorted image (camera matrix `matrix`) to floor points, robot frame."""
+    uv = np.asarray(uv, float)
+    xn = (uv[..., 0] - matrix[0, 2]) / matrix[0, 0]
+    yn = (uv[..., 1] - matrix[1, 2]) / matrix[1, 1]
+    return rays_to_floor(xn, yn, mounting)
+
+
+def floor_to_row(distance, matrix, mounting):
+    """The undistorted image row where floor `distance` metres ahead of the lens appears."""
+    angle = math.atan2(mounting.height, distance) - math.radians(mounting.pitch_deg)
+    return matrix[1, 2] + matrix[1, 1] * math.tan(angle)
+
+
+def tape_painted(s, side, gaps=(), dashes=None):
+    """Where along the track (arc lengths s) the tape on `side` is laid."""
+    painted = np.ones(len(s), bool)
+    if dashes and dashes['line'] in (side, 'both'):
+        painted &= (s % (dashes['on'] + dashes['off'])) < dashes['on']
+    for gap in gaps:
+        if gap['line'] in (side, 'both'):
+            painted &= ~((s >= gap['at']) & (s < gap['at'] + gap['length']))
+    return painted
+
+
 class FloorMap:
     """The track drawn from above: 255 where there is tape, 0 where there is floor."""
 
-    def __init__(self, track, margin=3.5, res=FLOOR_RES):
+    def __init__(self, track, gaps=(), dashes=None, margin=3.5, res=FLOOR_RES):
         left, right = track.tape_lines()
         pts = np.vstack([left, right])
         self.origin = pts.min(axis=0) - margin
@@ -108,10 +154,14 @@ class FloorMap:
         self.res = res
         canvas = np.zeros((size[1], size[0]), np.uint8)
         thickness = max(1, int(round(track.tape_width / res)))
-        for line in (left, right):
+        s = track.centre[:, 3]
+        for side, line in (('left', left), ('right', right)):
+            painted = tape_painted(s, side, gaps, dashes)
             px = np.round((line - self.origin) / res * 16).astype(np.int32)  # 4 bits subpixel
-            cv2.polylines(canvas, [px.reshape(-1, 1, 2)], False, 255, thickness, cv2.LINE_AA,
-                          shift=4)
+            for run in np.split(np.arange(len(s)), np.flatnonzero(np.diff(painted)) + 1):
+                if painted[run[0]] and len(run) > 1:
+                    cv2.polylines(canvas, [px[run].reshape(-1, 1, 2)], False, 255, thickness,
+                                  cv2.LINE_AA, shift=4)
         self.image = canvas
 
     def to_pixels(self, xy):
@@ -141,10 +191,7 @@ class FloorCamera:
         self._hits = {}
 
     def _rays(self, m):
-        p = math.radians(m.pitch_deg)
-        x_cam = np.array([0.0, -1.0, 0.0])
-        y_cam = np.array([-math.sin(p), 0.0, -math.cos(p)])
-        z_cam = np.array([math.cos(p), 0.0, -math.sin(p)])
+        x_cam, y_cam, z_cam = camera_axes(m.pitch_deg)
         xn, yn = self._norm[..., 0:1], self._norm[..., 1:2]
         return xn * x_cam + yn * y_cam + z_cam  # (H, W, 3) ray directions, robot frame
 
@@ -155,14 +202,9 @@ class FloorCamera:
         return self._hits[max_range]
 
     def _floor_hits(self, max_range):
-        m, d = self.mounting, self._rays_robot
-        down = -d[..., 2]
-        sky = down <= 1e-9
-        t = m.height / np.where(sky, 1.0, down)
-        x = m.forward + t * d[..., 0]
-        y = t * d[..., 1]
-        hit = ~sky & (np.hypot(x - m.forward, y) <= max_range)
-        return x, y, hit
+        m = self.mounting
+        x, y, ok = rays_to_floor(self._norm[..., 0], self._norm[..., 1], m)
+        return x, y, ok & (np.hypot(x - m.forward, y) <= max_range)
 
     def render(self, floor_map, pose, scene=None, rng=None):
         """One BGR frame of the floor at robot pose (x, y, yaw)."""

@@ -24,7 +24,6 @@ unopenable source or no ROS master, 130 Ctrl-C, 143 SIGTERM.
 """
 
 import argparse
-import dataclasses
 import json
 import math
 import os
@@ -33,32 +32,16 @@ import socket
 import sys
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
 from calibration import CalibrationError, calibration_camera, load_calibration
 from frames import SourceError, open_source
+from settings import add_arguments, finite, positive, resolve, setting, validate
 
 TOPIC = '/mobile_base/commands/velocity'  # kobuki_node's velocity command input
-
-
-def _positive(x):
-    return math.isfinite(x) and x > 0
-
-
-def _finite(x):
-    return math.isfinite(x)
-
-
-def _odd_positive(x):
-    return x > 0 and x % 2 == 1
-
-
-def setting(default, help, unit='', check=None, choices=None):
-    """One row of the defaults table: value, unit, where it comes from, and its check."""
-    return field(default=default, metadata=dict(help=help, unit=unit, check=check, choices=choices))
 
 
 @dataclass
@@ -69,42 +52,34 @@ class LaneParams:
                              "before Hough; '1.0' does not (the lecture's first demo)",
                              choices=('1.0', '1.1'))
     blur_kernel: int = setting(5, 'GaussianBlur kernel size, odd (lecture: (5, 5), sigma 0)',
-                               'px', _odd_positive)
+                               'px', lambda k: k > 0 and k % 2 == 1)
     canny_low: float = setting(85.0, 'Canny lower hysteresis threshold (lecture: 85)', '',
-                               _finite)
+                               finite)
     canny_high: float = setting(85.0, 'Canny upper hysteresis threshold (lecture: 85)', '',
-                                _finite)
+                                finite)
     hough_rho: float = setting(6.0, 'HoughLinesP distance resolution (lecture: rho=6)', 'px',
-                               _positive)
+                               positive)
     hough_theta: float = setting(math.pi / 60, 'HoughLinesP angle resolution '
-                                 '(lecture: theta=pi/60)', 'rad', _positive)
+                                 '(lecture: theta=pi/60)', 'rad', positive)
     hough_threshold: int = setting(160, 'HoughLinesP accumulator votes (lecture: 160)', 'votes',
-                                   _positive)
+                                   positive)
     min_line_length: float = setting(40.0, 'HoughLinesP minLineLength (lecture: 40)', 'px',
-                                     _finite)
-    max_line_gap: float = setting(25.0, 'HoughLinesP maxLineGap (lecture: 25)', 'px', _finite)
+                                     finite)
+    max_line_gap: float = setting(25.0, 'HoughLinesP maxLineGap (lecture: 25)', 'px', finite)
     slope_min: float = setting(0.5, 'segments with |slope| below this join neither slope group '
-                               '(lecture: 0.5)', '', _finite)
+                               '(lecture: 0.5)', '', finite)
     threshold: float = setting(6.0, 'theta above +threshold turns left, below -threshold right '
-                               '(lecture: threshold = 6)', 'rad, summed', _finite)
+                               '(lecture: threshold = 6)', 'rad, summed', finite)
     turn_linear: float = setting(0.01, 'forward speed while turning (lecture: 0.01)', 'm/s',
-                                 _finite)
+                                 finite)
     turn_angular: float = setting(0.06, 'turn rate; left +, right - (lecture: 0.06)', 'rad/s',
-                                  _finite)
+                                  finite)
     straight_linear: float = setting(0.05, 'forward speed going straight (lecture: 0.05)', 'm/s',
-                                     _finite)
-    rate: float = setting(4.0, 'loop and publish rate (lecture: rospy.Rate(4))', 'Hz', _positive)
+                                     finite)
+    rate: float = setting(4.0, 'loop and publish rate (lecture: rospy.Rate(4))', 'Hz', positive)
 
     def validate(self):
-        """Raise ValueError naming the first setting that is out of range."""
-        for f in dataclasses.fields(self):
-            value, meta = getattr(self, f.name), f.metadata
-            if meta['choices'] and value not in meta['choices']:
-                raise ValueError(f"{f.name} must be one of {', '.join(meta['choices'])}, "
-                                 f"not {value!r}")
-            if meta['check'] and not meta['check'](value):
-                raise ValueError(f'{f.name} = {value!r} is out of range: {meta["help"]}')
-        return self
+        return validate(self)
 
 
 # ---------------------------------------------------------------- the lecture's stages
@@ -194,8 +169,11 @@ class Detection:
     stages: dict = None  # intermediate images, only when asked for
 
 
-def detect(frame, camera, p, keep_stages=False):
-    """calibrate -> gray -> blur -> Canny -> ROI -> Hough -> slope sum."""
+def detect(frame, camera, p, keep_stages=False, roi=None):
+    """calibrate -> gray -> blur -> Canny -> ROI -> Hough -> slope sum.
+
+    roi: a mask image (uint8, 255 = keep) to use instead of the algorithm's triangle.
+    """
     raw = as_bgr(frame)
     image = calibration_camera(raw, camera)
     # fixed: the lecture takes gray from the raw frame, so undistortion had no effect
@@ -203,7 +181,9 @@ def detect(frame, camera, p, keep_stages=False):
     blurred = cv2.GaussianBlur(gray, (p.blur_kernel, p.blur_kernel), 0)
     edged = cv2.Canny(blurred, p.canny_low, p.canny_high)
     height, width = image.shape[:2]
-    if p.algorithm == '1.1':
+    if roi is not None:
+        masked = cv2.bitwise_and(edged, roi)
+    elif p.algorithm == '1.1':
         masked = region_of_interest(edged, region_of_interest_vertices(width, height))
     else:
         masked = edged
@@ -232,6 +212,12 @@ class LectureRule:
 
     def __init__(self, p):
         self.p = p
+
+    def perceive(self, frame, camera):
+        return detect(frame, camera, self.p)
+
+    def extra(self):
+        return {}
 
     def __call__(self, detection):
         p, theta = self.p, detection.slopes.theta
@@ -373,7 +359,7 @@ class LaneFollower:
 
     def step(self, frame, label):
         """Process one frame and publish its command; returns the decision record."""
-        detection = detect(frame, self.camera, self.p)
+        detection = self.controller.perceive(frame, self.camera)
         command = self.controller(detection)
         self._publish(command)
         s = detection.slopes
@@ -381,7 +367,8 @@ class LaneFollower:
                       theta=round(s.theta, 6), value=round(s.value, 6),
                       decision=command.decision, linear_x=command.linear_x,
                       angular_z=command.angular_z, t=round(self.ros.get_time(), 6),
-                      left_count=s.left_count, right_count=s.right_count, vertical=s.vertical)
+                      left_count=s.left_count, right_count=s.right_count, vertical=s.vertical,
+                      **self.controller.extra())
         self.counts[command.decision] += 1
         self.frames += 1
         self.ros.loginfo('frame %d (%s): %d lines, theta %+.3f, value %+.3f -> %s '
@@ -489,31 +476,29 @@ def build_parser():
     io.add_argument('--wait-for-base', type=float, default=2.0, metavar='SECONDS',
                     help='on ROS, wait this long for a subscriber (the Kobuki base) before '
                          'the first command (default: 2)')
-    tune = parser.add_argument_group("the lecture's settings (defaults are the lecture's)")
-    for f in dataclasses.fields(LaneParams):
-        meta = f.metadata
-        unit = f' [{meta["unit"]}]' if meta['unit'] else ''
-        kind = str if f.type is str or f.type == 'str' else (
-            int if f.type is int or f.type == 'int' else float)
-        tune.add_argument('--' + f.name.replace('_', '-'), dest=f.name, type=kind, default=None,
-                          choices=meta['choices'], metavar=None if meta['choices'] else 'X',
-                          help=f'{meta["help"]}{unit}; default {f.default:g}'
-                          if kind is not str else f'{meta["help"]}; default {f.default}')
+    io.add_argument('--controller', choices=('lecture', 'improved'), default=None,
+                    help="'lecture': the lecture's rule on theta (default); 'improved': lane "
+                         'offset and heading from the segments on the floor, PD steering '
+                         '(lane_control.py)')
+    add_arguments(parser.add_argument_group("the lecture's settings (defaults are the "
+                                            "lecture's)"), LaneParams)
+    from lane_control import ImprovedParams
+
+    add_arguments(parser.add_argument_group('the improved controller (--controller improved)'),
+                  ImprovedParams)
     return parser
 
 
-def resolve_params(args, get_param):
-    """Flag given > private ROS parameter > the lecture's default; ValueError if out of range."""
-    values = {}
-    for f in dataclasses.fields(LaneParams):
-        flag = getattr(args, f.name)
-        value = flag if flag is not None else get_param('~' + f.name, f.default)
-        if f.type in (float, 'float') and isinstance(value, (int, float)):
-            value = float(value)
-        elif f.type in (str, 'str'):
-            value = str(value)
-        values[f.name] = value
-    return LaneParams(**values).validate()
+def make_controller(args, params, get_param):
+    """The lecture's rule, or the improved controller with its settings resolved."""
+    name = args.controller or str(get_param('~controller', 'lecture'))
+    if name == 'lecture':
+        return LectureRule(params)
+    if name != 'improved':
+        raise ValueError(f"controller must be lecture or improved, not '{name}'")
+    from lane_control import ImprovedController, ImprovedParams
+
+    return ImprovedController(params, resolve(ImprovedParams, args, get_param))
 
 
 def fail(message):
@@ -619,7 +604,8 @@ def main(argv=None):
     else:
         ros, twist_type = connect_ros(private)
     try:
-        params = resolve_params(args, ros.get_param)
+        params = resolve(LaneParams, args, ros.get_param)
+        controller = make_controller(args, params, ros.get_param)
     except (ValueError, TypeError) as e:
         parser.error(str(e))
     try:
@@ -630,13 +616,15 @@ def main(argv=None):
     show_progress = args.progress == 'on' or (args.progress == 'auto' and sys.stderr.isatty())
     decisions = open(args.decisions, 'w', encoding='utf-8') if args.decisions else None
     video = VideoSink(args.video, params.rate) if args.video else None
-    follower = LaneFollower(ros, twist_type, source, params, camera, decisions=decisions,
+    follower = LaneFollower(ros, twist_type, source, params, camera, controller=controller,
+                            decisions=decisions,
                             video=video, show=args.show,
                             progress=Progress(source.total, show_progress),
                             wait_for_base=0.0 if args.dry_run else args.wait_for_base)
     install_signal_handlers(follower)
-    ros.loginfo('kobuki_lane: source %s, algorithm %s, calibration %s, %.1f Hz on %s%s',
-                source.name, params.algorithm, args.calibration, params.rate, TOPIC,
+    ros.loginfo('kobuki_lane: source %s, %s controller, algorithm %s, calibration %s, %.1f Hz '
+                'on %s%s', source.name, controller.name, params.algorithm, args.calibration,
+                params.rate, TOPIC,
                 ' (dry run)' if args.dry_run else '')
     start = time.monotonic()
     try:
@@ -657,4 +645,6 @@ def main(argv=None):
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    import kobuki_lane  # run as the module itself, so lane_control shares its classes
+
+    sys.exit(kobuki_lane.main())

@@ -8,8 +8,9 @@ ROSInterruptException) with rospy's semantics, on a clock you choose:
     WallClock()  real time: Rate.sleep() really sleeps (dry runs with --realtime)
 
 Published messages are recorded in `StandInRospy.published` as (time_s, topic, message)
-instead of being sent. tests/test_ros_real.py runs the same loop against Debian's real rospy
-and checks that what a real subscriber receives matches, so the two cannot drift apart.
+instead of being sent, and handed to any `listeners` (the simulator's robot base).
+tests/test_ros_real.py runs the same loop against Debian's real rospy and checks that what a
+real subscriber receives matches, so the two cannot drift apart.
 """
 
 import sys
@@ -99,7 +100,10 @@ class Publisher:
     def publish(self, msg):
         if self._ros.is_shutdown():
             raise ROSException('publish() to a closed topic')
-        self._ros.published.append((self._ros.clock.now(), self.name, msg))
+        now = self._ros.clock.now()
+        self._ros.published.append((now, self.name, msg))
+        for listener in self._ros.listeners:
+            listener(now, self.name, msg)
 
     def get_num_connections(self):
         return 1  # the recorder always listens
@@ -118,6 +122,7 @@ class StandInRospy:
         self.clock = clock if clock is not None else SimClock()
         self.params = dict(params or {})
         self.published = []
+        self.listeners = []  # callables (time, topic, message): a simulated robot listens here
         self.log_lines = []
         self._quiet = quiet
         self._shutdown_reason = None

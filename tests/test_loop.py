@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from frames import ListSource
-from kobuki_lane import Command, LaneFollower, LaneParams
+from kobuki_lane import Command, LaneFollower, LaneParams, LectureRule
 from rospy_standin import SimClock, StandInRospy, Twist
 
 
@@ -19,6 +19,17 @@ class ScriptedSource(ListSource):
     def read(self):
         self._on_read(self._next)
         return super().read()
+
+
+class Scripted(LectureRule):
+    """The lecture's perception with commands chosen by the test."""
+
+    def __init__(self, decide):
+        super().__init__(LaneParams())
+        self.decide = decide
+
+    def __call__(self, detection):
+        return self.decide(detection)
 
 
 def blank_frames(n):
@@ -49,7 +60,7 @@ def test_every_branch_keeps_the_pace(monkeypatch):
     # left, right, straight and none in turn: the lecture slept only after straight
     decisions = iter(['left', 'right', 'straight', 'none'] * 2)
     ros, follower = make(ListSource(blank_frames(8)))
-    follower.controller = lambda d: Command(next(decisions), 0.01, 0.0)
+    follower.controller = Scripted(lambda d: Command(next(decisions), 0.01, 0.0))
     follower.run()
     times = [t for t, _, _ in twists(ros)[:8]]
     assert np.allclose(np.diff(times), 0.25)
@@ -83,7 +94,7 @@ def test_a_stop_request_ends_the_loop_and_nothing_moves_after_the_zero():
     source = ScriptedSource(blank_frames(10),
                             on_read=lambda i: i == 4 and holder['f'].request_stop('SIGINT'))
     ros, follower = make(source)
-    follower.controller = lambda detection: Command('straight', 0.2, 0.0)
+    follower.controller = Scripted(lambda detection: Command('straight', 0.2, 0.0))
     holder['f'] = follower
     assert follower.run() == 'SIGINT'
     out = twists(ros)
@@ -113,7 +124,7 @@ def test_an_exception_in_the_pipeline_still_stops_the_robot():
             raise RuntimeError('boom')
         return Command('straight', 0.05, 0.0)
 
-    follower.controller = broken
+    follower.controller = Scripted(broken)
     with pytest.raises(RuntimeError):
         follower.run()
     out = twists(ros)

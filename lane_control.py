@@ -1,0 +1,280 @@
+"""The improved controller: the lane's offset, heading and curvature from the Hough segments
+projected onto the floor, and a PD steering law on them. The lecture's answer to its own
+closing remark: "you have to do continuous estimation of the angle how much to turn".
+
+Perception uses the lecture's stages (undistort, gray, blur, Canny, mask, HoughLinesP) with
+settings for the floor: the mask is the floor band `roi_near`..`roi_far` metres ahead given
+by the camera model, and Hough accepts shorter segments. Each segment is projected onto the
+floor (camera matrix + mounting), sorted to the left or right line by which side of the
+predicted centre line it lies, shifted half a lane width towards the centre, and a centre line
+y = a + b x + c x^2 (robot frame: x ahead, y left) is fitted to all of it. One line is enough,
+since the lane width is known. The fit is blended over time with a prediction from the
+commanded motion, weighted by a confidence. No lane for `lost_timeout` seconds: stop.
+
+Steering looks at the fitted centre line a distance L ahead, where the segments are (a short
+piece of one line seen on a bend is not extrapolated back to the robot): its lateral position
+y_L and its slope there. The commanded path curvature is
+    k_cmd = alpha * 2 y_L / L^2 + (1 - alpha) * slope_L / L,     angular.z = v * k_cmd.
+On a circle of radius R both terms are 1/R, so there is no steady-state error. With offset e
+[m, + left of centre] and heading h [rad, + turned left], y_L ~ -e - L h + L^2 / 2R and
+slope_L ~ -h + L / R, so this is PD on offset (gain 2 alpha / L^2) and heading (gain
+(1 + alpha) / L) with curvature feed-forward; alpha = 1 is pure pursuit, alpha = 3 (damping
+ratio 0.82) closes in on the centre line about 1.7 times faster per metre. angular.z is
+saturated to `omega_max`; speed is `v_max`, reduced on bends and when the confidence is low.
+"""
+
+import math
+from dataclasses import dataclass, replace
+
+import cv2
+import numpy as np
+
+from floor_camera import Mounting, floor_to_row, pixels_to_floor
+from settings import finite, fraction, positive, setting
+
+
+@dataclass
+class ImprovedParams:
+    """The improved controller's settings: perception, estimate, steering."""
+
+    camera_height: float = setting(0.20, 'camera lens above the floor', 'm', positive)
+    camera_pitch: float = setting(0.0, 'camera optical axis below horizontal', 'deg',
+                                  finite)
+    camera_forward: float = setting(0.10, 'camera lens ahead of the robot centre', 'm',
+                                    finite)
+    lane_width: float = setting(0.35, 'between the tape centres', 'm', positive)
+    roi_near: float = setting(0.3, 'floor mask starts this far ahead (clipped to the view)', 'm',
+                              positive)
+    roi_far: float = setting(2.0, 'floor mask ends this far ahead', 'm', positive)
+    hough_rho_improved: float = setting(2.0, 'HoughLinesP rho for the improved perception',
+                                        'px', positive)
+    hough_threshold_improved: int = setting(30, 'HoughLinesP votes for the improved perception',
+                                            'votes', positive)
+    min_line_length_improved: float = setting(20.0, 'HoughLinesP minLineLength, improved', 'px',
+                                              finite)
+    max_line_gap_improved: float = setting(10.0, 'HoughLinesP maxLineGap, improved', 'px',
+                                           finite)
+    max_segments: int = setting(60, 'at most this many segments used per frame (the longest); '
+                                'bounds the work on cluttered frames', '', positive)
+    smoothing: float = setting(0.6, 'weight of a full-confidence measurement against the '
+                               'prediction', '', fraction)
+    lost_timeout: float = setting(1.0, 'stop when no lane has been seen for this long', 's',
+                                  positive)
+    v_max: float = setting(0.25, 'forward speed on a straight, confident lane', 'm/s',
+                           positive)
+    v_min: float = setting(0.08, 'forward speed never drops below this while driving', 'm/s',
+                           positive)
+    curve_slowdown: float = setting(0.8, 'speed divided by (1 + this x |curvature|)', 'm',
+                                    finite)
+    lookahead: float = setting(0.9, 'steer at the centre line this far ahead, or nearer where '
+                               'the lane is seen nearer', 'm', positive)
+    lookahead_min: float = setting(0.6, 'the look-ahead never comes closer than this', 'm',
+                                   positive)
+    lateral_gain: float = setting(3.0, 'alpha: weight of the look-ahead offset against its '
+                                  'direction (1 = pure pursuit)', '', positive)
+    omega_max: float = setting(1.5, 'turn rate limit', 'rad/s', positive)
+    dead_band: float = setting(0.05, "angular.z within this is recorded as 'straight'", 'rad/s',
+                               finite)
+
+    @property
+    def mounting(self):
+        return Mounting(self.camera_height, self.camera_pitch, self.camera_forward)
+
+
+@dataclass
+class LaneEstimate:
+    a: float  # centre line y at x = 0 [m]
+    b: float  # slope of the centre line at x = 0
+    c: float  # half its curvature [1/m]
+    confidence: float  # 0..1
+    left: int = 0  # segments on the left line
+    right: int = 0  # segments on the right line
+    reach: float = 1.0  # [m] mean distance ahead of the points the fit rests on
+
+    @property
+    def offset(self):  # robot left of the lane centre [m]
+        return -self.a
+
+    @property
+    def heading(self):  # robot turned left of the lane direction [rad]
+        return -math.atan(self.b)
+
+    @property
+    def curvature(self):  # the lane bends left [1/m]
+        return 2 * self.c / (1 + self.b ** 2) ** 1.5
+
+
+def floor_roi(width, height, p, camera=None, margin=4):
+    """Mask (255 = keep) of the floor band roi_near..roi_far ahead. With a calibration, less
+    the border that undistortion leaves empty: its edge would otherwise look like a line."""
+    from calibration import LECTURE_CAMERA, calibration_camera
+
+    matrix = (camera or LECTURE_CAMERA).scaled_to(width, height).matrix
+    top = int(np.clip(math.floor(floor_to_row(p.roi_far, matrix, p.mounting)), 0, height))
+    bottom = int(np.clip(math.ceil(floor_to_row(p.roi_near, matrix, p.mounting)), top, height))
+    mask = np.zeros((height, width), np.uint8)
+    mask[top:bottom] = 255
+    if camera is not None:
+        filled = calibration_camera(np.full((height, width), 255, np.uint8), camera) == 255
+        filled = cv2.erode(filled.astype(np.uint8) * 255, np.ones((3, 3), np.uint8),
+                           iterations=margin)
+        mask = cv2.bitwise_and(mask, filled)
+    return mask
+
+
+def floor_segments(lines, matrix, p):
+    """Segments projected onto the floor, sampled every 5 cm: a list of (x, y, weight, phi)."""
+    lines = np.asarray(lines, float).reshape(-1, 4)
+    if len(lines) == 0:
+        return []
+    lengths = np.hypot(lines[:, 2] - lines[:, 0], lines[:, 3] - lines[:, 1])
+    lines = lines[np.argsort(-lengths)[:p.max_segments]]
+    x, y, ok = pixels_to_floor(lines.reshape(-1, 2, 2), matrix, p.mounting)
+    keep = ok.all(axis=1) & (x.max(axis=1) < p.roi_far + 1.0)
+    out = []
+    for (x0, x1), (y0, y1) in zip(x[keep], y[keep], strict=True):
+        if x1 < x0:  # direction ambiguity: make every segment point ahead
+            x0, x1, y0, y1 = x1, x0, y1, y0
+        length, phi = math.hypot(x1 - x0, y1 - y0), math.atan2(y1 - y0, x1 - x0)
+        if length < 0.04 or abs(phi) > math.radians(70):
+            continue
+        t = np.linspace(0.0, 1.0, max(2, int(length / 0.05) + 1))
+        out.append((x0 + t * (x1 - x0), y0 + t * (y1 - y0), length / len(t), phi))
+    return out
+
+
+def fit_sides(segments, guess, half):
+    """Sort segments to the left or right line of the centre line `guess` (a, b, c), move
+    them half a lane towards the centre, refit; a few rounds. Returns (a, b, c), the sides
+    and the weighted mean squared misfit of the lines to the fit."""
+    a, b, c = guess
+    for _ in range(4):
+        sides = np.array([1.0 if np.mean(sy - (a + b * sx + c * sx ** 2)) > 0 else -1.0
+                          for sx, sy, _, _ in segments])
+        cx = np.concatenate([sx + side * half * math.sin(phi)
+                             for (sx, _, _, phi), side in zip(segments, sides, strict=True)])
+        cy = np.concatenate([sy - side * half * math.cos(phi)
+                             for (_, sy, _, phi), side in zip(segments, sides, strict=True)])
+        w = np.concatenate([np.full(len(sx), wt) for sx, _, wt, _ in segments])
+        a, b, c = fit_centre(cx, cy, w)
+    misfit = float(np.sum(w * (cy - (a + b * cx + c * cx ** 2)) ** 2) / w.sum())
+    return (a, b, c), sides, misfit
+
+
+def measure(lines, matrix, p, prior=None):
+    """One frame's LaneEstimate from its segments, or None when they show no lane."""
+    segments = floor_segments(lines, matrix, p)
+    if not segments:
+        return None
+    guesses = [(0.0, 0.0, 0.0), (0.0, 0.0, 0.4), (0.0, 0.0, -0.4)]
+    if prior is not None:
+        guesses.insert(0, (prior.a, prior.b, prior.c))
+    fits = [fit_sides(segments, g, p.lane_width / 2) for g in guesses]
+    # the prediction wins unless another guess explains the lines clearly better
+    best = min(range(len(fits)), key=lambda i: fits[i][2] * (0.5 if i == 0 and prior else 1))
+    (a, b, c), sides, _ = fits[best]
+    total = sum(len(sx) * wt for sx, _, wt, _ in segments)
+    left, right = int(np.sum(sides > 0)), int(np.sum(sides < 0))
+    confidence = min(1.0, total / 1.0) * (1.0 if left and right else 0.7)
+    reach = sum(float(np.sum(sx)) * wt for sx, _, wt, _ in segments) / total
+    return LaneEstimate(a, b, c, confidence, left, right, reach)
+
+
+def fit_centre(x, y, w, ridge=0.05):
+    """Weighted least squares y = a + b x + c x^2, with c pulled towards 0 on short spans."""
+    columns = [np.ones_like(x), x, x ** 2]
+    A = np.stack(columns, axis=1) * np.sqrt(w)[:, None]
+    rhs = y * np.sqrt(w)
+    reg = np.diag([0.0, 1e-4, ridge]) * w.sum()
+    coef = np.linalg.solve(A.T @ A + reg, A.T @ rhs)
+    return float(coef[0]), float(coef[1]), float(coef[2])
+
+
+def predict(est, v, omega, dt):
+    """The centre line as seen after driving `dt` seconds at (v, omega)."""
+    ds, dtheta = v * dt, omega * dt
+    a = est.a + est.b * ds + est.c * ds ** 2
+    b = est.b + 2 * est.c * ds - dtheta * (1 + est.b ** 2)
+    return replace(est, a=a, b=b, confidence=est.confidence * 0.8)
+
+
+def blend(pred, meas, weight):
+    return LaneEstimate(pred.a + weight * (meas.a - pred.a), pred.b + weight * (meas.b - pred.b),
+                        pred.c + weight * (meas.c - pred.c),
+                        pred.confidence + weight * (meas.confidence - pred.confidence),
+                        meas.left, meas.right, meas.reach)
+
+
+def steer(est, p):
+    """(linear.x, angular.z) for a lane estimate: PD at the look-ahead, see the module doc."""
+    x = float(np.clip(est.reach, p.lookahead_min, p.lookahead))
+    y = est.a + est.b * x + est.c * x ** 2
+    slope = est.b + 2 * est.c * x
+    k = p.lateral_gain * 2 * y / x ** 2 + (1 - p.lateral_gain) * slope / x  # [1/m]
+    v = p.v_max / (1 + p.curve_slowdown * abs(k)) * (0.5 + 0.5 * est.confidence)
+    v = float(np.clip(v, p.v_min, p.v_max))
+    return v, float(np.clip(v * k, -p.omega_max, p.omega_max))
+
+
+class ImprovedController:
+    """Perceive -> estimate -> steer, one frame at a time; drop-in for kobuki_lane.LectureRule."""
+
+    name = 'improved'
+
+    def __init__(self, lane_params, p=None):
+        self.p = p or ImprovedParams()
+        self.dt = 1.0 / lane_params.rate
+        self.detect_params = replace(  # the lecture's blur and Canny settings stay
+            lane_params, hough_rho=self.p.hough_rho_improved, hough_theta=math.pi / 180,
+            hough_threshold=self.p.hough_threshold_improved,
+            min_line_length=self.p.min_line_length_improved,
+            max_line_gap=self.p.max_line_gap_improved)
+        self.estimate = None
+        self.lost_for = math.inf  # [s] since the lane was last seen
+        self.last = (0.0, 0.0)  # the last command (v, omega)
+        self._matrix = None
+        self._roi = {}  # mask per (camera, width, height)
+
+    def perceive(self, frame, camera):
+        from calibration import LECTURE_CAMERA
+        from kobuki_lane import detect
+
+        h, w = frame.shape[:2]
+        # with no calibration the pixels are taken as the lecture camera's, scaled to the frame
+        geometry = camera or LECTURE_CAMERA
+        self._matrix = geometry.scaled_to(w, h).matrix
+        key = (id(camera), w, h)
+        if key not in self._roi:
+            self._roi[key] = floor_roi(w, h, self.p, camera)
+        return detect(frame, camera, self.detect_params, roi=self._roi[key])
+
+    def __call__(self, detection):
+        from kobuki_lane import STOP, Command
+
+        p = self.p
+        prior = predict(self.estimate, *self.last, self.dt) if self.estimate else None
+        meas = measure(detection.lines, self._matrix, p, prior)
+        if meas is not None:
+            self.lost_for = 0.0
+            self.estimate = blend(prior, meas, p.smoothing * meas.confidence) if prior else meas
+        else:
+            self.lost_for += self.dt
+            self.estimate = prior
+        if self.estimate is None or self.lost_for > p.lost_timeout:
+            self.last = (0.0, 0.0)
+            return STOP
+        v, omega = steer(self.estimate, p)
+        self.last = (v, omega)
+        decision = ('left' if omega > p.dead_band else
+                    'right' if omega < -p.dead_band else 'straight')
+        return Command(decision, v, omega)
+
+    def extra(self):
+        """The estimate, for the decision records."""
+        e = self.estimate
+        if e is None:
+            return dict(offset_m=None, heading_rad=None, curvature=None, confidence=0.0,
+                        lane_lost_s=None)
+        return dict(offset_m=round(e.offset, 4), heading_rad=round(e.heading, 4),
+                    curvature=round(e.curvature, 4), confidence=round(e.confidence, 3),
+                    lane_lost_s=round(min(self.lost_for, 1e6), 3))

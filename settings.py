@@ -1,0 +1,69 @@
+"""Tables of defaults: dataclass fields that carry their unit, their help and their check.
+
+One table turns into command-line flags (`add_arguments`), is filled from flags, private ROS
+parameters and defaults in that order (`resolve`), and is checked (`validate`).
+"""
+
+import dataclasses
+import math
+
+
+def setting(default, help, unit='', check=None, choices=None):
+    """One row of a defaults table: value, unit, where it comes from, and its check."""
+    return dataclasses.field(default=default,
+                             metadata=dict(help=help, unit=unit, check=check, choices=choices))
+
+
+def positive(x):
+    return math.isfinite(x) and x > 0
+
+
+def finite(x):
+    return math.isfinite(x)
+
+
+def fraction(x):
+    return math.isfinite(x) and 0 < x <= 1
+
+
+def _kind(f):
+    name = f.type if isinstance(f.type, str) else f.type.__name__
+    return {'str': str, 'int': int}.get(name, float)
+
+
+def validate(params):
+    """Raise ValueError naming the first setting that is out of range."""
+    for f in dataclasses.fields(params):
+        value, meta = getattr(params, f.name), f.metadata
+        if meta['choices'] and value not in meta['choices']:
+            raise ValueError(f"{f.name} must be one of {', '.join(meta['choices'])}, "
+                             f'not {value!r}')
+        if meta['check'] and not meta['check'](value):
+            raise ValueError(f'{f.name} = {value!r} is out of range: {meta["help"]}')
+    return params
+
+
+def add_arguments(group, table):
+    """A --flag for every row of `table` (a dataclass), defaulting to None (not given)."""
+    for f in dataclasses.fields(table):
+        meta, kind = f.metadata, _kind(f)
+        unit = f' [{meta["unit"]}]' if meta['unit'] else ''
+        default = f.default if kind is str else f'{f.default:g}'
+        group.add_argument('--' + f.name.replace('_', '-'), dest=f.name, type=kind, default=None,
+                           choices=meta['choices'], metavar=None if meta['choices'] else 'X',
+                           help=f'{meta["help"]}{unit}; default {default}')
+
+
+def resolve(table, args, get_param):
+    """Flag given > private ROS parameter (~name) > default; ValueError if out of range."""
+    values = {}
+    for f in dataclasses.fields(table):
+        flag = getattr(args, f.name)
+        value = flag if flag is not None else get_param('~' + f.name, f.default)
+        kind = _kind(f)
+        if kind is float and isinstance(value, (int, float)) and not isinstance(value, bool):
+            value = float(value)
+        elif kind is str:
+            value = str(value)
+        values[f.name] = value
+    return validate(table(**values))
