@@ -60,7 +60,7 @@ class ImprovedParams:
                                'prediction', '', fraction)
     lost_timeout: float = setting(1.0, 'stop when no lane has been seen for this long', 's',
                                   positive)
-    v_max: float = setting(0.25, 'forward speed on a straight, confident lane', 'm/s',
+    v_max: float = setting(0.35, 'forward speed on a straight, confident lane', 'm/s',
                            positive)
     v_min: float = setting(0.08, 'forward speed never drops below this while driving', 'm/s',
                            positive)
@@ -169,9 +169,17 @@ def measure(lines, matrix, p, prior=None):
     guesses = [(0.0, 0.0, 0.0), (0.0, 0.0, 0.4), (0.0, 0.0, -0.4)]
     if prior is not None:
         guesses.insert(0, (prior.a, prior.b, prior.c))
-    fits = [fit_sides(segments, g, p.lane_width / 2) for g in guesses]
-    # the prediction wins unless another guess explains the lines clearly better
-    best = min(range(len(fits)), key=lambda i: fits[i][2] * (0.5 if i == 0 and prior else 1))
+    half = p.lane_width / 2
+    fits = [fit_sides(segments, g, half) for g in guesses]
+
+    def score(i):
+        (a, _, _), _, misfit = fits[i]
+        if prior is not None:  # the prediction wins unless a guess explains the lines better
+            return misfit * (0.5 if i == 0 else 1.0)
+        # with no history, one line fits as well on either side: take the robot in its lane
+        return misfit + max(0.0, abs(a) - half) ** 2
+
+    best = min(range(len(fits)), key=score)
     (a, b, c), sides, _ = fits[best]
     total = sum(len(sx) * wt for sx, _, wt, _ in segments)
     left, right = int(np.sum(sides > 0)), int(np.sum(sides < 0))

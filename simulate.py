@@ -321,8 +321,10 @@ def apply_variant(spec, variant):
         spec.scene.noise = cond['noise']
     if 'gradient' in cond:
         spec.scene.gradient = cond['gradient']
-    if 'gap' in cond:  # in the left tape, 40 % of the way along
-        spec.gaps = spec.gaps + [dict(line='left', at=0.4 * spec.track.length,
+    if 'gap' in cond:
+        # 40 % of the way along every built-in track is in a left bend, where the right (outer)
+        # tape is the only one in view: the gap takes away all the camera sees
+        spec.gaps = spec.gaps + [dict(line='right', at=0.4 * spec.track.length,
                                       length=cond['gap'])]
     return spec
 
