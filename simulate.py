@@ -336,7 +336,7 @@ def _bench_job(job):
     return result
 
 
-def benchmark(jobs=2, seed=0, stream=sys.stdout):
+def benchmark(jobs=2, seed=0, stream=None):
     """Every built-in track x both controllers, and the improved one under each condition."""
     work = [(t, c, 'clean', seed) for t in BUILTIN for c in ('lecture', 'improved')]
     work += [(t, 'improved', v, seed) for v in VARIANTS if v != 'clean' for t in BUILTIN]
@@ -347,7 +347,7 @@ def benchmark(jobs=2, seed=0, stream=sys.stdout):
             results = pool.map(_bench_job, work)
     else:
         results = [_bench_job(job) for job in work]
-    stream.write(benchmark_table(results))
+    (stream or sys.stdout).write(benchmark_table(results))
     return results
 
 
