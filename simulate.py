@@ -363,22 +363,16 @@ def benchmark_table(results):
     return '\n'.join(rows) + '\n'
 
 
-def parse_gap(text):
-    try:
-        line, at, length = text.split(':')
-        return dict(line=line, at=float(at), length=float(length))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"'{text}' is not LINE:AT:LENGTH, e.g. left:2.0:0.2") \
-            from None
-
-
-def parse_dashes(text):
-    try:
-        line, on, off = text.split(':')
-        return dict(line=line, on=float(on), off=float(off))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"'{text}' is not LINE:ON:OFF, e.g. left:0.1:0.1") \
-            from None
+def tape_option(first, second, example):
+    """An argparse type for LINE:<first>:<second> (metres), e.g. --gap left:2.0:0.2."""
+    def parse(text):
+        try:
+            line, a, b = text.split(':')
+            return {'line': line, first: float(a), second: float(b)}
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"'{text}' is not LINE:{first.upper()}:"
+                                             f'{second.upper()}, e.g. {example}') from None
+    return parse
 
 
 def build_parser():
@@ -401,9 +395,11 @@ def build_parser():
     scene.add_argument('--noise', type=float, help='frame noise sigma [grey levels]')
     scene.add_argument('--gradient', type=float, help='lighting gradient [grey levels]')
     scene.add_argument('--glare', type=float, help='glare patch brightness [grey levels]')
-    scene.add_argument('--gap', type=parse_gap, action='append', default=[],
+    scene.add_argument('--gap', type=tape_option('at', 'length', 'left:2.0:0.2'),
+                       action='append', default=[],
                        metavar='LINE:AT:LENGTH', help='tape missing, e.g. left:2.0:0.2 [m]')
-    scene.add_argument('--dashes', type=parse_dashes, metavar='LINE:ON:OFF',
+    scene.add_argument('--dashes', type=tape_option('on', 'off', 'both:0.1:0.1'),
+                       metavar='LINE:ON:OFF',
                        help='dashed tape, e.g. both:0.1:0.1 [m]')
     scene.add_argument('--camera-height', type=float, help='[m]')
     scene.add_argument('--camera-pitch', type=float, help='down from horizontal [deg]')
@@ -443,7 +439,10 @@ def customise(spec, args):
             fail(f'--gap {gap}: line must be left, right or both, length positive')
     spec.gaps = spec.gaps + args.gap
     if args.dashes:
-        spec.dashes = args.dashes
+        d = args.dashes
+        if d['line'] not in ('left', 'right', 'both') or d['on'] <= 0 or d['off'] <= 0:
+            fail(f'--dashes {d}: line must be left, right or both, on and off positive')
+        spec.dashes = d
     if args.camera_height is not None:
         spec.mounting.height = args.camera_height
     if args.camera_pitch is not None:

@@ -228,3 +228,13 @@ def test_the_node_runs_the_improved_controller(tmp_path):
     # the samples wobble a little about the centre of a lane that bends left, then right
     assert all(r['linear_x'] > 0 for r in records)
     assert {r['decision'] for r in records} >= {'left', 'right'}
+
+
+@pytest.mark.parametrize('args', [['--gap', 'left:two:0.2'], ['--gap', 'middle:1:0.2'],
+                                  ['--dashes', 'both:0.1'], ['--dashes', 'left:0:0.1'],
+                                  ['--controller', 'clever']])
+def test_simulate_rejects_bad_scene_flags(args, capsys):
+    with pytest.raises(SystemExit) as e:
+        simulate.main(['--track', 'lecture', *args])
+    assert e.value.code == 2
+    assert 'error' in capsys.readouterr().err
