@@ -39,7 +39,7 @@ import numpy as np
 
 from calibration import CalibrationError, calibration_camera, load_calibration
 from frames import SourceError, open_source
-from settings import add_arguments, finite, positive, resolve, setting, validate
+from settings import add_arguments, finite, positive, resolve, setting
 
 TOPIC = '/mobile_base/commands/velocity'  # kobuki_node's velocity command input
 
@@ -77,9 +77,6 @@ class LaneParams:
     straight_linear: float = setting(0.05, 'forward speed going straight (lecture: 0.05)', 'm/s',
                                      finite)
     rate: float = setting(4.0, 'loop and publish rate (lecture: rospy.Rate(4))', 'Hz', positive)
-
-    def validate(self):
-        return validate(self)
 
 
 # ---------------------------------------------------------------- the lecture's stages
@@ -531,8 +528,9 @@ def master_online(timeout=3.0):
         socket.setdefaulttimeout(old)
 
 
-def connect_ros(private):
-    """The real rospy and Twist, with the node registered; exit status 2 if no master."""
+def connect_ros():
+    """The real rospy and Twist, with the node registered (rospy reads _name:=value itself);
+    exit status 2 if no master."""
     try:
         import rospy
         from geometry_msgs.msg import Twist
@@ -602,7 +600,7 @@ def main(argv=None):
                            quiet=args.quiet)
         ros.init_node('kobuki_lane')
     else:
-        ros, twist_type = connect_ros(private)
+        ros, twist_type = connect_ros()
     try:
         params = resolve(LaneParams, args, ros.get_param)
         controller = make_controller(args, params, ros.get_param)
