@@ -219,3 +219,14 @@ def test_progress_line_on_request():
     assert f'frame {n}/{n}' in proc.stderr
     quiet = cli('--source', SAMPLES, '--dry-run', '--quiet', '--progress', 'off')
     assert 'frames/s \n' not in quiet.stderr.split('kobuki_lane:')[0]
+
+
+def test_controller_and_its_gains_from_private_params(tmp_path):
+    out = tmp_path / 'd.jsonl'
+    assert main(['--source', SAMPLES, '--dry-run', '_controller:=improved', '_v_max:=0.2',
+                 '--decisions', str(out), '--quiet']) == 0
+    records = read_jsonl(out)
+    assert all('offset_m' in r for r in records)
+    assert max(r['linear_x'] for r in records) <= 0.2
+    proc = cli('--source', SAMPLES, '--dry-run', '_controller:=clever')
+    assert proc.returncode == 2 and 'controller must be lecture or improved' in proc.stderr
