@@ -104,14 +104,19 @@ def camera_axes(pitch_deg):
             np.array([math.cos(p), 0.0, -math.sin(p)]))
 
 
+def ray_directions(xn, yn, pitch_deg):
+    """Normalised image coordinates to ray directions (..., 3) in the robot frame."""
+    x_cam, y_cam, z_cam = camera_axes(pitch_deg)
+    xn, yn = np.asarray(xn, float)[..., None], np.asarray(yn, float)[..., None]
+    return xn * x_cam + yn * y_cam + z_cam
+
+
 def rays_to_floor(xn, yn, mounting):
     """Normalised image coordinates to floor points (x, y) in the robot frame.
 
     Returns x, y and a mask of the rays that point down to the floor.
     """
-    x_cam, y_cam, z_cam = camera_axes(mounting.pitch_deg)
-    xn, yn = np.asarray(xn, float)[..., None], np.asarray(yn, float)[..., None]
-    d = xn * x_cam + yn * y_cam + z_cam
+    d = ray_directions(xn, yn, mounting.pitch_deg)
     down = -d[..., 2]
     ok = down > 1e-9
     t = mounting.height / np.where(ok, down, 1.0)
@@ -185,15 +190,9 @@ class FloorCamera:
         crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-10)
         norm = cv2.undistortPointsIter(pix, camera.matrix, camera.distortion, None, None, crit)
         self._norm = norm.reshape(h * n, w * n, 2)
-        self._rays_robot = self._rays(self.mounting)
-        d = self._rays_robot
+        d = ray_directions(self._norm[..., 0], self._norm[..., 1], self.mounting.pitch_deg)
         self._azimuth = np.arctan2(d[..., 1], d[..., 0])  # ray direction, robot frame [rad]
         self._hits = {}
-
-    def _rays(self, m):
-        x_cam, y_cam, z_cam = camera_axes(m.pitch_deg)
-        xn, yn = self._norm[..., 0:1], self._norm[..., 1:2]
-        return xn * x_cam + yn * y_cam + z_cam  # (H, W, 3) ray directions, robot frame
 
     def floor_hits(self, max_range):
         """Per subpixel: floor point (x, y) in the robot frame, and whether it is on the floor."""
