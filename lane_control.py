@@ -29,7 +29,9 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
+from calibration import LECTURE_CAMERA, calibration_camera
 from floor_camera import Mounting, floor_to_row, pixels_to_floor
+from kobuki_lane import STOP, Command, detect
 from settings import finite, fraction, positive, setting
 
 
@@ -107,8 +109,6 @@ class LaneEstimate:
 def floor_roi(width, height, p, camera=None, margin=4):
     """Mask (255 = keep) of the floor band roi_near..roi_far ahead. With a calibration, less
     the border that undistortion leaves empty: its edge would otherwise look like a line."""
-    from calibration import LECTURE_CAMERA, calibration_camera
-
     matrix = (camera or LECTURE_CAMERA).scaled_to(width, height).matrix
     top = int(np.clip(math.floor(floor_to_row(p.roi_far, matrix, p.mounting)), 0, height))
     bottom = int(np.clip(math.ceil(floor_to_row(p.roi_near, matrix, p.mounting)), top, height))
@@ -148,6 +148,7 @@ def fit_sides(segments, guess, half):
     them half a lane towards the centre, refit; a few rounds. Returns (a, b, c), the sides
     and the weighted mean squared misfit of the lines to the fit."""
     a, b, c = guess
+    w = np.concatenate([np.full(len(sx), wt) for sx, _, wt, _ in segments])
     for _ in range(4):
         sides = np.array([1.0 if np.mean(sy - (a + b * sx + c * sx ** 2)) > 0 else -1.0
                           for sx, sy, _, _ in segments])
@@ -155,7 +156,6 @@ def fit_sides(segments, guess, half):
                              for (sx, _, _, phi), side in zip(segments, sides, strict=True)])
         cy = np.concatenate([sy - side * half * math.cos(phi)
                              for (_, sy, _, phi), side in zip(segments, sides, strict=True)])
-        w = np.concatenate([np.full(len(sx), wt) for sx, _, wt, _ in segments])
         a, b, c = fit_centre(cx, cy, w)
     misfit = float(np.sum(w * (cy - (a + b * cx + c * cx ** 2)) ** 2) / w.sum())
     return (a, b, c), sides, misfit
@@ -244,9 +244,6 @@ class ImprovedController:
         self._roi = {}  # mask per (camera, width, height)
 
     def perceive(self, frame, camera):
-        from calibration import LECTURE_CAMERA
-        from kobuki_lane import detect
-
         h, w = frame.shape[:2]
         # with no calibration the pixels are taken as the lecture camera's, scaled to the frame
         geometry = camera or LECTURE_CAMERA
@@ -257,8 +254,6 @@ class ImprovedController:
         return detect(frame, camera, self.detect_params, roi=self._roi[key])
 
     def __call__(self, detection):
-        from kobuki_lane import STOP, Command
-
         p = self.p
         prior = predict(self.estimate, *self.last, self.dt) if self.estimate else None
         meas = measure(detection.lines, self._matrix, p, prior)
