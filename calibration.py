@@ -71,6 +71,17 @@ def calibration_camera(seeimg, camera):
     return cv2.undistort(seeimg, cam.matrix, cam.distortion, None, cam.matrix)
 
 
+def undistortion_maps(camera, width, height):
+    """The maps cv2.undistort builds on every call, built once for cv2.remap.
+
+    They are the CV_16SC2 fixed-point maps cv2.undistort uses inside, so
+    cv2.remap(frame, *maps, cv2.INTER_LINEAR) gives exactly calibration_camera(frame, camera).
+    """
+    cam = camera.scaled_to(width, height)
+    return cv2.initUndistortRectifyMap(cam.matrix, cam.distortion, None, cam.matrix,
+                                       (width, height), cv2.CV_16SC2)
+
+
 def load_calibration(spec):
     """'lecture' -> LECTURE_CAMERA, 'none' -> None, anything else -> a camera_info YAML path."""
     if spec == 'lecture':

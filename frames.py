@@ -12,7 +12,9 @@ index otherwise. Unreadable files in a folder are skipped with a warning and cou
 """
 
 import os
+import queue
 import sys
+import threading
 
 import cv2
 
@@ -104,6 +106,59 @@ class ListSource:
 
     def release(self):
         pass
+
+
+class Prefetch:
+    """Reads a file source ahead on a second thread, so decoding overlaps processing; the
+    loop gets the same frames in the same order. Not for live sources: a queue of frames
+    read ahead would be a queue of stale views."""
+
+    def __init__(self, source, depth=4):
+        self.source = source
+        self.name, self.live, self.total = source.name, source.live, source.total
+        self._queue = queue.Queue(maxsize=depth)
+        self._stop = threading.Event()
+        self._last = None  # the end-of-input item, once seen
+        self._thread = threading.Thread(target=self._fill, name='prefetch', daemon=True)
+        self._thread.start()
+
+    @property
+    def skipped(self):
+        return self.source.skipped
+
+    def _put(self, item):
+        while not self._stop.is_set():
+            try:
+                self._queue.put(item, timeout=0.1)
+                return
+            except queue.Full:
+                continue
+
+    def _fill(self):
+        try:
+            while not self._stop.is_set():
+                item = self.source.read()
+                self._put(item)
+                if not item[0]:
+                    return
+        except Exception as e:  # handed to the loop's thread, raised by read()
+            self._put(e)
+
+    def read(self):
+        if self._last is not None:
+            return self._last
+        item = self._queue.get()
+        if isinstance(item, Exception):
+            self._last = (False, None, None)
+            raise item
+        if not item[0]:
+            self._last = item
+        return item
+
+    def release(self):
+        self._stop.set()
+        self._thread.join(timeout=5)
+        self.source.release()
 
 
 def is_image_file(path):

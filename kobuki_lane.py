@@ -37,8 +37,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from calibration import CalibrationError, calibration_camera, load_calibration
-from frames import SourceError, open_source
+from calibration import CalibrationError, load_calibration, undistortion_maps
+from frames import Prefetch, SourceError, open_source
 from settings import add_arguments, finite, positive, resolve, setting
 
 TOPIC = '/mobile_base/commands/velocity'  # kobuki_node's velocity command input
@@ -156,40 +156,163 @@ def slope_sum(lines, slope_min=0.5):
     return s
 
 
-@dataclass
 class Detection:
-    """One frame through the pipeline."""
+    """One frame through the pipeline.
 
-    lines: np.ndarray  # (N, 4) segments x1, y1, x2, y2 in the undistorted image [px]
-    slopes: SlopeSum
-    image: np.ndarray  # the undistorted BGR frame the segments belong to
-    stages: dict = None  # intermediate images, only when asked for
+    lines: (N, 4) segments x1, y1, x2, y2 in the undistorted image [px]; slopes: SlopeSum;
+    image: the undistorted BGR frame the segments belong to (made on first use, since only
+    pictures need the whole of it); stages: intermediate images, only when asked for.
+    """
+
+    def __init__(self, lines, slopes, image=None, stages=None, make_image=None):
+        self.lines, self.slopes, self.stages = lines, slopes, stages
+        self._image, self._make_image = image, make_image
+
+    @property
+    def image(self):
+        if self._image is None and self._make_image is not None:
+            self._image, self._make_image = self._make_image(), None
+        return self._image
+
+
+class Layout:
+    """What stays the same from frame to frame for one frame size, camera and mask: the
+    undistortion maps (cv2.undistort rebuilds them on every call), the mask, the part of the
+    frame it reaches and the buffers."""
+
+    STRIPS = 8  # the band is undistorted in this many strips, each only as wide as the mask
+    # needs there (bench.py: more strips cost more in calls than they save in pixels)
+
+    def __init__(self, width, height, camera, roi, p):
+        self.key = (width, height, p.algorithm, p.blur_kernel)
+        self.camera, self.roi = camera, roi
+        self.maps = None
+        if camera is not None:
+            self.maps = undistortion_maps(camera, width, height)
+        if roi is not None:
+            self.mask = roi
+        elif p.algorithm == '1.1':
+            self.mask = np.zeros((height, width), np.uint8)
+            cv2.fillPoly(self.mask, region_of_interest_vertices(width, height), 255)
+        else:
+            self.mask = None
+        rows = (np.flatnonzero(self.mask.any(axis=1)) if self.mask is not None
+                else np.arange(height))
+        self.top, self.bottom = (int(rows[0]), int(rows[-1]) + 1) if rows.size else (0, 0)
+        # an edge pixel depends on the blurred pixels 2 px away (Sobel, then non-maximum
+        # suppression) and those on the gray ones blur_kernel // 2 px away
+        self.margin = p.blur_kernel // 2 + 3
+        self.first = max(self.top - self.margin, 0)
+        self.last = min(self.bottom + self.margin, height)
+        self.strips = self._strips(width, height) if self.mask is not None else []
+        self.band = np.zeros((self.last - self.first, width, 3), np.uint8)
+        self.edges = np.zeros((height, width), np.uint8)  # Hough's input; zero off the band
+
+    def _strips(self, width, height):
+        """(first row, last row, first column, last column) of each strip of the band."""
+        bounds = np.linspace(self.first, self.last, self.STRIPS + 1).astype(int)
+        strips = []
+        for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+            near = self.mask[max(a - self.margin, 0):min(b + self.margin, height)]
+            cols = np.flatnonzero(near.any(axis=0))
+            if b > a and cols.size:
+                strips.append((int(a), int(b), max(int(cols[0]) - self.margin, 0),
+                               min(int(cols[-1]) + 1 + self.margin, width)))
+        return strips
+
+    def matches(self, width, height, camera, roi, p):
+        return (self.key == (width, height, p.algorithm, p.blur_kernel)
+                and self.camera is camera and self.roi is roi)
+
+    def undistort(self, raw):
+        """The whole undistorted frame."""
+        if self.maps is None:
+            return raw
+        return cv2.remap(raw, *self.maps, cv2.INTER_LINEAR)
+
+    def undistort_band(self, raw):
+        """Rows first:last of the undistorted frame, right wherever the mask's edges can
+        depend on them (elsewhere whatever an earlier frame left)."""
+        if self.maps is None:
+            return raw[self.first:self.last]
+        m1, m2 = self.maps
+        for a, b, x0, x1 in self.strips:
+            cv2.remap(raw, m1[a:b, x0:x1], m2[a:b, x0:x1], cv2.INTER_LINEAR,
+                      dst=self.band[a - self.first:b - self.first, x0:x1])
+        return self.band
+
+
+class Pipeline:
+    """calibrate -> gray -> blur -> Canny -> ROI -> Hough -> slope sum, doing only the work
+    that can change a segment.
+
+    The segments are identical, frame by frame, to the lecture's literal calls (whole frame,
+    cv2.undistort each time; tests/test_pipeline.py holds the line): the undistortion maps are
+    made once; only the rows the mask reaches, plus the few rows their edges depend on, are
+    gray-converted, blurred and edged, and only the part of those rows near the mask is
+    undistorted. Hough still gets a full-size image, zero off the mask, so its accumulator is
+    the one the lecture's call builds. Canny's hysteresis can link weak edges from far away
+    unless canny_low == canny_high (the lecture's 85, 85); otherwise, and when the stages are
+    kept for pictures, the whole frame is processed.
+    """
+
+    def __init__(self, p, mark=None):
+        self.p = p
+        self.mark = mark or (lambda stage: None)  # called after each stage (bench.py times them)
+        self._layout = None
+
+    def layout(self, width, height, camera, roi):
+        if self._layout is None or not self._layout.matches(width, height, camera, roi, self.p):
+            self._layout = Layout(width, height, camera, roi, self.p)
+        return self._layout
+
+    def __call__(self, frame, camera, keep_stages=False, roi=None):
+        p, mark = self.p, self.mark
+        mark('start')
+        raw = as_bgr(frame)
+        height, width = raw.shape[:2]
+        lay = self.layout(width, height, camera, roi)
+        whole = (keep_stages or p.canny_low != p.canny_high or lay.mask is None
+                 or lay.top == lay.bottom)
+        first = 0 if whole else lay.first
+        image = lay.undistort(raw) if whole else lay.undistort_band(raw)
+        mark('undistort')
+        # fixed: the lecture takes gray from the raw frame, so undistortion had no effect
+        gray = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+        mark('gray')
+        blurred = cv2.GaussianBlur(gray, (p.blur_kernel, p.blur_kernel), 0)
+        mark('blur')
+        edged = cv2.Canny(blurred, p.canny_low, p.canny_high)
+        mark('canny')
+        if lay.mask is None:
+            masked = edged
+        elif whole:
+            masked = cv2.bitwise_and(edged, lay.mask)
+        else:
+            top, bottom = lay.top, lay.bottom
+            cv2.bitwise_and(edged[top - first:bottom - first], lay.mask[top:bottom],
+                            dst=lay.edges[top:bottom])
+            masked = lay.edges
+        mark('roi')
+        lines = hough_lines(masked, p)
+        mark('hough')
+        slopes = slope_sum(lines, p.slope_min)
+        mark('slopes')
+        if keep_stages:
+            stages = dict(raw=raw, undistorted=image, gray=gray, blurred=blurred, edges=edged,
+                          masked=masked)
+            return Detection(lines, slopes, image, stages)
+        if whole:
+            return Detection(lines, slopes, image)
+        return Detection(lines, slopes, make_image=lambda: lay.undistort(raw))
 
 
 def detect(frame, camera, p, keep_stages=False, roi=None):
-    """calibrate -> gray -> blur -> Canny -> ROI -> Hough -> slope sum.
+    """One frame through a fresh Pipeline (the loop keeps one Pipeline for all frames).
 
     roi: a mask image (uint8, 255 = keep) to use instead of the algorithm's triangle.
     """
-    raw = as_bgr(frame)
-    image = calibration_camera(raw, camera)
-    # fixed: the lecture takes gray from the raw frame, so undistortion had no effect
-    gray = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
-    blurred = cv2.GaussianBlur(gray, (p.blur_kernel, p.blur_kernel), 0)
-    edged = cv2.Canny(blurred, p.canny_low, p.canny_high)
-    height, width = image.shape[:2]
-    if roi is not None:
-        masked = cv2.bitwise_and(edged, roi)
-    elif p.algorithm == '1.1':
-        masked = region_of_interest(edged, region_of_interest_vertices(width, height))
-    else:
-        masked = edged
-    lines = hough_lines(masked, p)
-    stages = None
-    if keep_stages:
-        stages = dict(raw=raw, undistorted=image, gray=gray, blurred=blurred, edges=edged,
-                      masked=masked)
-    return Detection(lines, slope_sum(lines, p.slope_min), image, stages)
+    return Pipeline(p)(frame, camera, keep_stages, roi)
 
 
 @dataclass(frozen=True)
@@ -209,9 +332,10 @@ class LectureRule:
 
     def __init__(self, p):
         self.p = p
+        self.pipeline = Pipeline(p)
 
     def perceive(self, frame, camera):
-        return detect(frame, camera, self.p)
+        return self.pipeline(frame, camera)
 
     def extra(self):
         return {}
@@ -597,7 +721,7 @@ def main(argv=None):
         twist_type = Twist
         clock_live = args.realtime or args.source.isdigit() or '://' in args.source
         ros = StandInRospy(WallClock() if clock_live else SimClock(), params=private,
-                           quiet=args.quiet)
+                           quiet=args.quiet, keep=100)
         ros.init_node('kobuki_lane')
     else:
         ros, twist_type = connect_ros()
@@ -610,6 +734,8 @@ def main(argv=None):
         source = open_source(args.source, warn=ros.logwarn)
     except SourceError as e:
         fail(str(e))
+    if not source.live:
+        source = Prefetch(source)  # decode the next frames on the second core
 
     show_progress = args.progress == 'on' or (args.progress == 'auto' and sys.stderr.isatty())
     decisions = open(args.decisions, 'w', encoding='utf-8') if args.decisions else None

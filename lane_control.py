@@ -31,7 +31,7 @@ import numpy as np
 
 from calibration import LECTURE_CAMERA, calibration_camera
 from floor_camera import Mounting, floor_to_row, pixels_to_floor
-from kobuki_lane import STOP, Command, detect
+from kobuki_lane import STOP, Command, Pipeline
 from settings import finite, fraction, positive, setting
 
 
@@ -242,6 +242,7 @@ class ImprovedController:
         self.last = (0.0, 0.0)  # the last command (v, omega)
         self._matrix = None
         self._roi = {}  # mask per (camera, width, height)
+        self.pipeline = Pipeline(self.detect_params)
 
     def perceive(self, frame, camera):
         h, w = frame.shape[:2]
@@ -251,7 +252,7 @@ class ImprovedController:
         key = (id(camera), w, h)
         if key not in self._roi:
             self._roi[key] = floor_roi(w, h, self.p, camera)
-        return detect(frame, camera, self.detect_params, roi=self._roi[key])
+        return self.pipeline(frame, camera, roi=self._roi[key])
 
     def __call__(self, detection):
         p = self.p

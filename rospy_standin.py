@@ -8,13 +8,15 @@ ROSInterruptException) with rospy's semantics, on a clock you choose:
     WallClock()  real time: Rate.sleep() really sleeps (dry runs with --realtime)
 
 Published messages are recorded in `StandInRospy.published` as (time_s, topic, message)
-instead of being sent, and handed to any `listeners` (the simulator's robot base).
+instead of being sent, and handed to any `listeners` (the simulator's robot base); log lines
+in `log_lines`. keep=N remembers only the last N of each, so a long dry run does not grow.
 tests/test_ros_real.py runs the same loop against Debian's real rospy and checks that what a
 real subscriber receives matches, so the two cannot drift apart.
 """
 
 import sys
 import time
+from collections import deque
 from dataclasses import dataclass, field
 
 
@@ -118,12 +120,12 @@ class StandInRospy:
     ROSException = ROSException
     ROSInterruptException = ROSInterruptException
 
-    def __init__(self, clock=None, params=None, quiet=False):
+    def __init__(self, clock=None, params=None, quiet=False, keep=None):
         self.clock = clock if clock is not None else SimClock()
         self.params = dict(params or {})
-        self.published = []
+        self.published = deque(maxlen=keep)
         self.listeners = []  # callables (time, topic, message): a simulated robot listens here
-        self.log_lines = []
+        self.log_lines = deque(maxlen=keep)
         self._quiet = quiet
         self._shutdown_reason = None
         self._hooks = []

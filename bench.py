@@ -1,0 +1,455 @@
+#!/usr/bin/env python3
+"""Benchmark kobuki_lane's pipeline against the lecture's literal code and the OpenCV floor.
+
+One run, on the same 640x480 frames (samples/track and frames rendered by the simulator on
+every built-in track, with offsets, noise, a lighting gradient and gaps), prints:
+
+  pipeline    per-stage and whole-frame median and p95 milliseconds and frames per second for
+              literal  the slides' calls transcribed one by one (LITERAL below): cv2.undistort
+                       on every frame, the unused gray in calibration_camera, the mask made
+                       afresh, every row of the frame
+              project  kobuki_lane.Pipeline, the node's default (identical segments; see
+                       tests/test_pipeline.py)
+              floor    only the OpenCV calls no pipeline can avoid, each on its smallest input:
+                       remap, gray, blur and Canny on the rows the triangle reaches, the mask
+                       on its rows, HoughLinesP on the full-size image the lecture's call gets
+              and the ratios project/literal and project/floor. One OpenCV thread, as on one core.
+  latency     frame read -> Twist published, in LaneFollower's real loop (the stand-in rospy)
+  throughput  whole-process dry runs (python kobuki_lane.py --dry-run) over a video of
+              --video-frames frames, with the project's pipeline and with the literal one
+  memory      peak RSS, and RSS after 1,000 and after --soak frames of a dry run
+  worst case  the Hough stage on a cluttered frame (dense texture, many edges), for the lecture's
+              settings and for the improved controller's perception
+
+usage:
+    python bench.py                      everything (about 2 minutes on 2 cores)
+    python bench.py --quick              fewer frames, no throughput or memory runs
+    python bench.py --json out/bench.json
+
+default values: 300 simulator frames plus the 28 samples, each timed 3 times; a 2,000-frame
+video; a 10,000-frame soak.
+"""
+
+import argparse
+import json
+import math
+import os
+import platform
+import resource
+import subprocess
+import sys
+import time
+
+import cv2
+import numpy as np
+
+import kobuki_lane
+from calibration import LECTURE_CAMERA
+from floor_camera import FloorCamera, FloorMap
+from frames import ListSource
+from kobuki_lane import Detection, LaneFollower, LaneParams, Layout, Pipeline, slope_sum
+from rospy_standin import SimClock, StandInRospy, Twist
+from tracks import BUILTIN, load_track
+
+SAMPLES = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'samples', 'track')
+OUT = os.path.join('out', 'bench')
+STAGES = ('undistort', 'gray', 'blur', 'canny', 'roi', 'hough', 'slopes')
+
+
+# ---------------------------------------------------------------- the lecture, literally
+
+def literal_calibration_camera(seeimg):
+    """The slide's calibration_camera (18:57), less cv2.imshow."""
+    dist = np.array([2.28504143e-01, -7.32838958e+00, -2.43747623e-02, 9.12080996e-03,
+                     3.98425001e+01])
+    mtx = np.array([[893.45537548, 0.0, 309.61828309],
+                    [0.0, 866.99738285, 196.40832355],
+                    [0.0, 0.0, 1.0]])
+    gray = cv2.cvtColor(seeimg, cv2.COLOR_BGR2GRAY)  # noqa: F841 (the slide computes it too)
+    dst = cv2.undistort(seeimg, mtx, dist, None, mtx)
+    return dst
+
+
+def literal_region_of_interest(img, vertices):
+    mask = np.zeros_like(img)
+    cv2.fillPoly(mask, vertices, 255)
+    masked_image = cv2.bitwise_and(img, mask)
+    return masked_image
+
+
+def literal_lecture_pipeline(frame, algorithm='1.1', mark=lambda stage: None):
+    """The slides' main loop body (21:44 to 23:14) for one frame: (segments (N, 4), theta).
+
+    One departure, the project's fix: gray is taken from the undistorted image (the slide takes
+    it from the raw frame, so its undistortion was wasted); without it the two would not see
+    the same edges and no comparison of segments would mean anything.
+    """
+    mark('start')
+    image = frame.copy()
+    image = literal_calibration_camera(image)
+    mark('undistort')
+    gray = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    mark('gray')
+    blurred = cv2.GaussianBlur(gray, (5, 5), 0)
+    mark('blur')
+    edged = cv2.Canny(blurred, 85, 85)
+    mark('canny')
+    height, width = frame.shape[:2]
+    region_of_interest_vertices = [
+        (0, height),
+        (width / 2, height / 2),
+        (width, height),
+    ]
+    if algorithm == '1.1':
+        edged = literal_region_of_interest(edged, np.array([region_of_interest_vertices],
+                                                           np.int32))
+    mark('roi')
+    lines = cv2.HoughLinesP(
+        edged,
+        rho=6,
+        theta=np.pi / 60,
+        threshold=160,
+        lines=np.array([]),
+        minLineLength=40,
+        maxLineGap=25
+    )
+    mark('hough')
+    theta = 0.0
+    if lines is not None:
+        for x in range(0, len(lines)):
+            for x1, y1, x2, y2 in lines[x]:
+                theta = theta + math.atan2((y2 - y1), (x2 - x1))
+    mark('slopes')
+    return (np.empty((0, 4), np.int32) if lines is None else lines.reshape(-1, 4)), theta
+
+
+class Floor:
+    """The OpenCV calls no pipeline can skip, each on the smallest input it can have: remap and
+    gray on exactly the mask's pixels, blur and Canny on the rows the mask reaches, the mask on
+    those rows, HoughLinesP on the full-size image the lecture's call gets. With no mask
+    (algorithm 1.0) every call takes the whole frame."""
+
+    def __init__(self, p, width=640, height=480):
+        self.p = p
+        self.lay = Layout(width, height, LECTURE_CAMERA, None, p)
+        m1, m2 = self.lay.maps
+        if self.lay.mask is None:
+            self.top, self.bottom = 0, height
+            self.maps = m1, m2
+        else:
+            self.top, self.bottom = self.lay.top, self.lay.bottom
+            keep = np.flatnonzero(self.lay.mask.ravel() > 0)
+            keep = np.resize(keep, -(-keep.size // width) * width)  # whole rows of the mask's
+            self.maps = (m1.reshape(-1, 2)[keep].reshape(-1, width, 2),  # pixels, packed
+                         m2.reshape(-1)[keep].reshape(-1, width))
+
+    def __call__(self, raw, mark=lambda stage: None):
+        p, lay, top, bottom = self.p, self.lay, self.top, self.bottom
+        # the content blur and Canny see, made outside the timed calls
+        band = cv2.cvtColor(cv2.remap(raw, lay.maps[0][top:bottom], lay.maps[1][top:bottom],
+                                      cv2.INTER_LINEAR), cv2.COLOR_BGR2GRAY)
+        mark('start')
+        pixels = cv2.remap(raw, *self.maps, cv2.INTER_LINEAR)
+        mark('undistort')
+        cv2.cvtColor(pixels, cv2.COLOR_BGR2GRAY)
+        mark('gray')
+        blurred = cv2.GaussianBlur(band, (p.blur_kernel, p.blur_kernel), 0)
+        mark('blur')
+        edged = cv2.Canny(blurred, p.canny_low, p.canny_high)
+        mark('canny')
+        if lay.mask is not None:
+            cv2.bitwise_and(edged, lay.mask[top:bottom], dst=lay.edges[top:bottom])
+            edged = lay.edges
+        mark('roi')
+        cv2.HoughLinesP(edged, rho=p.hough_rho, theta=p.hough_theta,
+                        threshold=int(p.hough_threshold), minLineLength=p.min_line_length,
+                        maxLineGap=p.max_line_gap)
+        mark('hough')
+        mark('slopes')
+
+
+# ---------------------------------------------------------------- frames
+
+def simulator_frames(count, seed=0):
+    """`count` onboard views from every built-in track and benchmark condition, at random
+    places along the track with offsets up to 6 cm and heading errors up to 8 degrees."""
+    from simulate import VARIANTS, apply_variant
+
+    rng = np.random.default_rng(seed)
+    specs = [apply_variant(load_track(name), variant) for name in BUILTIN for variant in VARIANTS]
+    views = []
+    for spec in specs:
+        views.append((spec, FloorMap(spec.track, spec.gaps, spec.dashes),
+                      FloorCamera(LECTURE_CAMERA, spec.mounting)))
+    frames = []
+    for i in range(count):
+        spec, floor_map, camera = views[i % len(views)]
+        s = rng.uniform(0.0, spec.track.length * 0.95)
+        pose = spec.track.pose_at(s, rng.uniform(-0.06, 0.06), math.radians(rng.uniform(-8, 8)))
+        frames.append(camera.render(floor_map, pose, spec.scene, rng))
+    return frames
+
+
+def sample_frames():
+    names = sorted(f for f in os.listdir(SAMPLES) if f.endswith('.jpg'))
+    return [cv2.imread(os.path.join(SAMPLES, f)) for f in names]
+
+
+def cluttered_frame(seed=0, size=(480, 640)):
+    """Dense texture and many edges: a worst case for Canny and Hough."""
+    rng = np.random.default_rng(seed)
+    small = rng.integers(0, 256, (size[0] // 4, size[1] // 4, 3), dtype=np.uint8)
+    frame = cv2.resize(small, (size[1], size[0]), interpolation=cv2.INTER_NEAREST)
+    for _ in range(300):
+        x1, x2 = rng.integers(0, size[1], 2)
+        y1, y2 = rng.integers(0, size[0], 2)
+        cv2.line(frame, (int(x1), int(y1)), (int(x2), int(y2)),
+                 tuple(int(c) for c in rng.integers(0, 256, 3)), 2)
+    return frame
+
+
+# ---------------------------------------------------------------- timing
+
+class StageClock:
+    """mark(stage) records the time since the previous mark under that stage's name."""
+
+    def __init__(self):
+        self.times = {s: [] for s in STAGES + ('total',)}
+        self._start = self._last = 0.0
+
+    def mark(self, stage):
+        now = time.perf_counter()
+        if stage == 'start':
+            self._start = now
+        else:
+            self.times[stage].append(now - self._last)
+            if stage == 'slopes':
+                self.times['total'].append(now - self._start)
+        self._last = now
+
+
+def stats(seconds):
+    ms = np.asarray(seconds) * 1000.0
+    return dict(median_ms=round(float(np.median(ms)), 3),
+                p95_ms=round(float(np.percentile(ms, 95)), 3),
+                fps=round(1000.0 / float(np.median(ms)), 1))
+
+
+def time_pipelines(frames, repeats, algorithm='1.1'):
+    """Literal, project and floor on the same frames, interleaved so that drift and cache
+    effects hit all three alike."""
+    p = LaneParams(algorithm=algorithm)
+    clocks = {name: StageClock() for name in ('literal', 'project', 'floor')}
+    project = Pipeline(p, mark=clocks['project'].mark)
+    floor = Floor(p, *frames[0].shape[1::-1])
+    runs = [lambda f: literal_lecture_pipeline(f, algorithm, clocks['literal'].mark),
+            lambda f: project(f, LECTURE_CAMERA),
+            lambda f: floor(f, clocks['floor'].mark)]
+    for _ in range(repeats):
+        for i, frame in enumerate(frames):
+            for k in range(3):  # each goes first, second and third in turn
+                runs[(i + k) % 3](frame)
+    return {name: {stage: stats(t) for stage, t in clock.times.items()}
+            for name, clock in clocks.items()}
+
+
+def latency(frames):
+    """Frame read -> Twist published in LaneFollower's loop, over every frame."""
+    read_at, delays = [], []
+
+    class TimedSource(ListSource):
+        def read(self):
+            item = super().read()
+            read_at.append(time.perf_counter())
+            return item
+
+    ros = StandInRospy(SimClock(), quiet=True, keep=10)
+    ros.listeners.append(lambda *_: delays.append(time.perf_counter() - read_at[-1]))
+    follower = LaneFollower(ros, Twist, TimedSource(frames), LaneParams(), LECTURE_CAMERA)
+    follower.run()
+    return stats(delays[:-1])  # the last is the stop sent after the input ended
+
+
+def make_video(frames, count, path):
+    if os.path.exists(path) and cv2.VideoCapture(path).get(cv2.CAP_PROP_FRAME_COUNT) >= count:
+        return path
+    h, w = frames[0].shape[:2]
+    writer = cv2.VideoWriter(path, cv2.VideoWriter_fourcc(*'MJPG'), 30, (w, h))
+    for i in range(count):
+        writer.write(frames[i % len(frames)])
+    writer.release()
+    return path
+
+
+def throughput(video, count):
+    """Whole-process dry runs over the video: the project's pipeline, then the literal one."""
+    result = {}
+    for name, cmd in (('project', ['kobuki_lane.py']),
+                      ('literal', ['bench.py', '--literal-dry-run'])):
+        argv = [sys.executable] + cmd + ['--source', video, '--dry-run', '--quiet',
+                                         '--progress', 'off']
+        start = time.perf_counter()
+        subprocess.run(argv, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        elapsed = time.perf_counter() - start
+        result[name] = dict(frames=count, seconds=round(elapsed, 2),
+                            fps=round(count / elapsed, 1))
+    return result
+
+
+def rss_mb():
+    with open('/proc/self/statm') as f:
+        return int(f.read().split()[1]) * os.sysconf('SC_PAGE_SIZE') / 2**20
+
+
+def memory(frames, count):
+    """RSS after 1,000 frames and after `count` frames of a dry run over looped frames."""
+    marks = {}
+
+    class Looped(ListSource):
+        def read(self):
+            if self._next >= count:
+                return False, None, None
+            self._next += 1
+            if self._next in (1000, count):
+                marks[self._next] = rss_mb()
+            return True, frames[(self._next - 1) % len(frames)], self._next - 1
+
+    ros = StandInRospy(SimClock(), quiet=True, keep=100)
+    os.makedirs(OUT, exist_ok=True)
+    with open(os.path.join(OUT, 'soak_decisions.jsonl'), 'w') as decisions:
+        LaneFollower(ros, Twist, Looped([]), LaneParams(), LECTURE_CAMERA,
+                     decisions=decisions).run()
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    return dict(frames=count, rss_1000_mb=round(marks[1000], 1),
+                rss_end_mb=round(marks[count], 1),
+                growth_mb=round(marks[count] - marks[1000], 2), peak_rss_mb=round(peak, 1))
+
+
+def worst_case(repeats=20):
+    """The Hough stage on a cluttered frame, lecture settings and improved perception."""
+    from lane_control import ImprovedController
+
+    frame = cluttered_frame()
+    out = {}
+    lecture = StageClock()
+    pipe = Pipeline(LaneParams(), mark=lecture.mark)
+    improved = ImprovedController(LaneParams())
+    imp_clock = StageClock()
+    improved.pipeline.mark = imp_clock.mark
+    for _ in range(repeats):
+        pipe(frame, LECTURE_CAMERA)
+        det = improved.perceive(frame, LECTURE_CAMERA)
+    out['lecture'] = dict(hough=stats(lecture.times['hough']), total=stats(lecture.times['total']),
+                          segments=int(len(pipe(frame, LECTURE_CAMERA).lines)))
+    out['improved'] = dict(hough=stats(imp_clock.times['hough']),
+                           total=stats(imp_clock.times['total']), segments=int(len(det.lines)))
+    return out
+
+
+# ---------------------------------------------------------------- report
+
+def table(results):
+    rows = ['| stage | literal median / p95 ms | project median / p95 ms | '
+            'floor median / p95 ms |', '|---|---|---|---|']
+    for stage in STAGES + ('total',):
+        cells = [f"{results[n][stage]['median_ms']:.3f} / {results[n][stage]['p95_ms']:.3f}"
+                 for n in ('literal', 'project', 'floor')]
+        rows.append(f'| {stage} | ' + ' | '.join(cells) + ' |')
+    return '\n'.join(rows)
+
+
+def machine():
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open('/proc/cpuinfo') as f:
+            cpu = next(line.split(':', 1)[1].strip() for line in f if 'model name' in line)
+    except (OSError, StopIteration):
+        pass
+    return dict(cpu=cpu, cores=os.cpu_count(), python=platform.python_version(),
+                opencv=cv2.__version__, numpy=np.__version__)
+
+
+def literal_dry_run(argv):
+    """kobuki_lane.py's own main(), with the lecture's literal calls as the pipeline."""
+    def perceive(self, frame, camera):
+        lines, _ = literal_lecture_pipeline(frame, self.p.algorithm)
+        return Detection(lines, slope_sum(lines, self.p.slope_min))
+
+    kobuki_lane.LectureRule.perceive = perceive
+    return kobuki_lane.main(argv)
+
+
+def build_parser():
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('--sim-frames', type=int, default=300,
+                        help='simulator frames besides the 28 samples (default: 300)')
+    parser.add_argument('--repeats', type=int, default=3,
+                        help='times each frame is timed (default: 3)')
+    parser.add_argument('--video-frames', type=int, default=2000,
+                        help='length of the throughput video (default: 2000)')
+    parser.add_argument('--soak', type=int, default=10000,
+                        help='frames of the memory run (default: 10000)')
+    parser.add_argument('--quick', action='store_true',
+                        help='60 simulator frames, 1 repeat, no throughput or memory runs')
+    parser.add_argument('--json', metavar='FILE', help='write every figure as JSON')
+    return parser
+
+
+def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ['--literal-dry-run']:
+        return literal_dry_run(argv[1:])
+    args = build_parser().parse_args(argv)
+    if args.json and not os.path.isdir(os.path.dirname(os.path.abspath(args.json))):
+        print(f"bench.py: error: --json '{args.json}': folder does not exist", file=sys.stderr)
+        return 2
+    if args.quick:
+        args.sim_frames, args.repeats = 60, 1
+    cv2.setNumThreads(1)
+    report = dict(machine=machine())
+    print(f"machine: {report['machine']}")
+    print(f'rendering {args.sim_frames} simulator frames ...', file=sys.stderr)
+    frames = sample_frames() + simulator_frames(args.sim_frames)
+    report['frames'] = len(frames)
+    for algorithm in ('1.1', '1.0'):
+        res = time_pipelines(frames, args.repeats, algorithm)
+        tot = {n: res[n]['total']['median_ms'] for n in res}
+        res['ratios'] = dict(project_over_literal=round(tot['project'] / tot['literal'], 3),
+                             literal_over_project=round(tot['literal'] / tot['project'], 2),
+                             project_over_floor=round(tot['project'] / tot['floor'], 3))
+        report[f'pipeline_{algorithm}'] = res
+        print(f'\npipeline, algorithm {algorithm}: {len(frames)} frames x {args.repeats}, '
+              '640x480, one OpenCV thread')
+        print(table(res))
+        print(f"speed-up over literal {res['ratios']['literal_over_project']}x; "
+              f"project/floor {res['ratios']['project_over_floor']}")
+    report['latency'] = latency(frames)
+    print(f"\nframe read -> Twist published: median {report['latency']['median_ms']} ms, "
+          f"p95 {report['latency']['p95_ms']} ms")
+    report['worst_case'] = worst_case()
+    for name, w in report['worst_case'].items():
+        print(f"cluttered frame, {name}: Hough median {w['hough']['median_ms']} ms "
+              f"(p95 {w['hough']['p95_ms']}), whole pipeline {w['total']['median_ms']} ms, "
+              f"{w['segments']} segments")
+    if not args.quick:
+        os.makedirs(OUT, exist_ok=True)
+        video = make_video(frames, args.video_frames,
+                           os.path.join(OUT, f'video_{args.video_frames}.avi'))
+        report['throughput'] = tp = throughput(video, args.video_frames)
+        print(f"\ndry run over a {args.video_frames}-frame video, whole process: project "
+              f"{tp['project']['fps']} frames/s ({tp['project']['seconds']} s), literal "
+              f"{tp['literal']['fps']} frames/s ({tp['literal']['seconds']} s): "
+              f"{tp['project']['fps'] / tp['literal']['fps']:.2f}x")
+        report['memory'] = mem = memory(frames, args.soak)
+        print(f"memory: RSS {mem['rss_1000_mb']} MB after 1,000 frames, {mem['rss_end_mb']} MB "
+              f"after {mem['frames']:,}: growth {mem['growth_mb']} MB; peak RSS "
+              f"{mem['peak_rss_mb']} MB")
+    if args.json:
+        with open(args.json, 'w', encoding='utf-8') as f:
+            json.dump(report, f, indent=1)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,81 @@
+"""The optimised pipeline against the lecture's literal calls: the same segments, frame by frame."""
+
+import cv2
+import numpy as np
+import pytest
+
+from bench import cluttered_frame, literal_lecture_pipeline, sample_frames, simulator_frames
+from calibration import LECTURE_CAMERA, calibration_camera, undistortion_maps
+from kobuki_lane import LaneParams, Pipeline, hough_lines, region_of_interest_vertices
+from lane_control import ImprovedController
+
+
+@pytest.fixture(scope='module')
+def frames():
+    rng = np.random.default_rng(5)
+    sim = simulator_frames(200, seed=3)  # every built-in track and condition, random poses
+    noisy = [np.clip(f + rng.normal(0, 25, f.shape), 0, 255).astype(np.uint8) for f in sim[:20]]
+    return sample_frames() + sim + noisy + [cluttered_frame(1), cluttered_frame(2)]
+
+
+@pytest.mark.parametrize('algorithm', ['1.1', '1.0'])
+def test_segments_identical_to_the_literal_pipeline(frames, algorithm):
+    pipeline = Pipeline(LaneParams(algorithm=algorithm))
+    found = 0
+    for i, frame in enumerate(frames):
+        literal, theta = literal_lecture_pipeline(frame, algorithm)
+        ours = pipeline(frame, LECTURE_CAMERA)
+        assert np.array_equal(ours.lines, literal), f'frame {i}'
+        assert ours.slopes.theta == pytest.approx(theta, abs=1e-9)
+        found += len(literal)
+    assert found > len(frames)  # the frames do have segments to compare
+
+
+def test_undistortion_maps_give_exactly_cv2_undistort(frames):
+    maps = undistortion_maps(LECTURE_CAMERA, 640, 480)
+    for frame in frames[::25]:
+        assert np.array_equal(cv2.remap(frame, *maps, cv2.INTER_LINEAR),
+                              calibration_camera(frame, LECTURE_CAMERA))
+
+
+def test_the_whole_undistorted_image_is_still_there_for_pictures(frames):
+    detection = Pipeline(LaneParams())(frames[0], LECTURE_CAMERA)
+    assert np.array_equal(detection.image, calibration_camera(frames[0], LECTURE_CAMERA))
+
+
+def test_improved_perception_band_matches_the_whole_frame(frames):
+    improved = ImprovedController(LaneParams())
+    for frame in frames[::4]:
+        fast = improved.perceive(frame, LECTURE_CAMERA)
+        whole = improved.pipeline(frame, LECTURE_CAMERA, keep_stages=True,
+                                  roi=improved._roi[(id(LECTURE_CAMERA), 640, 480)])
+        assert np.array_equal(fast.lines, whole.lines)
+
+
+def whole_frame(frame, p):
+    """The stages on every pixel, with p's settings (the lecture's calls, parameterised)."""
+    edges = cv2.Canny(cv2.GaussianBlur(cv2.cvtColor(calibration_camera(frame, LECTURE_CAMERA),
+                                                    cv2.COLOR_BGR2GRAY), (5, 5), 0),
+                      p.canny_low, p.canny_high)
+    mask = np.zeros_like(edges)
+    cv2.fillPoly(mask, region_of_interest_vertices(640, 480), 255)
+    return hough_lines(cv2.bitwise_and(edges, mask), p)
+
+
+def test_hysteresis_settings_still_match_the_whole_frame(frames):
+    # with canny_low < canny_high weak edges may link across rows, so no rows are skipped
+    p = LaneParams(canny_low=40.0, canny_high=120.0)
+    pipeline = Pipeline(p)
+    for frame in frames[::10]:
+        assert np.array_equal(pipeline(frame, LECTURE_CAMERA).lines, whole_frame(frame, p))
+
+
+def test_frame_size_and_camera_changes_rebuild_the_layout(frames):
+    pipeline = Pipeline(LaneParams())
+    small = cv2.resize(frames[3], (320, 240))
+    a = pipeline(small, LECTURE_CAMERA).lines
+    pipeline(frames[3], LECTURE_CAMERA)
+    b = pipeline(small, LECTURE_CAMERA).lines
+    c = Pipeline(LaneParams())(small, None).lines
+    d = pipeline(small, None).lines
+    assert np.array_equal(a, b) and np.array_equal(c, d)
