@@ -17,7 +17,8 @@ every built-in track, with offsets, noise, a lighting gradient and gaps), prints
   latency     frame read -> Twist published, in LaneFollower's real loop (the stand-in rospy)
   throughput  whole-process dry runs (python kobuki_lane.py --dry-run) over a video of
               --video-frames frames, with the project's pipeline and with the literal one
-  memory      peak RSS, and RSS after 1,000 and after --soak frames of a dry run
+  memory      in a fresh process running the node's dry-run loop over the samples, looped:
+              RSS after 1,000 and after --soak frames, and the peak
   worst case  the Hough stage on a cluttered frame (dense texture, many edges), for the lecture's
               settings and for the improved controller's perception
 
@@ -195,12 +196,15 @@ def sample_frames():
     return [cv2.imread(os.path.join(SAMPLES, f)) for f in names]
 
 
-def cluttered_frame(seed=0, size=(480, 640)):
+def cluttered_frame(seed=0, size=(480, 640), lines=300, texture=True):
     """Dense texture and many edges: a worst case for Canny and Hough."""
     rng = np.random.default_rng(seed)
-    small = rng.integers(0, 256, (size[0] // 4, size[1] // 4, 3), dtype=np.uint8)
-    frame = cv2.resize(small, (size[1], size[0]), interpolation=cv2.INTER_NEAREST)
-    for _ in range(300):
+    if texture:
+        small = rng.integers(0, 256, (size[0] // 4, size[1] // 4, 3), dtype=np.uint8)
+        frame = cv2.resize(small, (size[1], size[0]), interpolation=cv2.INTER_NEAREST)
+    else:
+        frame = np.full((size[0], size[1], 3), 95, np.uint8)
+    for _ in range(lines):
         x1, x2 = rng.integers(0, size[1], 2)
         y1, y2 = rng.integers(0, size[0], 2)
         cv2.line(frame, (int(x1), int(y1)), (int(x2), int(y2)),
@@ -301,9 +305,10 @@ def rss_mb():
         return int(f.read().split()[1]) * os.sysconf('SC_PAGE_SIZE') / 2**20
 
 
-def memory(frames, count):
-    """RSS after 1,000 frames and after `count` frames of a dry run over looped frames."""
-    marks = {}
+def memory_child(count):
+    """In a fresh process: the node's dry-run loop over the samples, looped to `count` frames,
+    with decisions written; prints RSS after 1,000 frames, at the end, and the peak (JSON)."""
+    frames, marks = sample_frames(), {}
 
     class Looped(ListSource):
         def read(self):
@@ -320,29 +325,52 @@ def memory(frames, count):
         LaneFollower(ros, Twist, Looped([]), LaneParams(), LECTURE_CAMERA,
                      decisions=decisions).run()
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    return dict(frames=count, rss_1000_mb=round(marks[1000], 1),
-                rss_end_mb=round(marks[count], 1),
-                growth_mb=round(marks[count] - marks[1000], 2), peak_rss_mb=round(peak, 1))
+    print(json.dumps(dict(frames=count, rss_1000_mb=round(marks[1000], 1),
+                          rss_end_mb=round(marks[count], 1),
+                          growth_mb=round(marks[count] - marks[1000], 2),
+                          peak_rss_mb=round(peak, 1))))
+    return 0
+
+
+def memory(count):
+    out = subprocess.run([sys.executable, __file__, '--memory-child', str(count)], check=True,
+                         capture_output=True, text=True).stdout
+    return json.loads(out.strip().splitlines()[-1])
 
 
 def worst_case(repeats=20):
-    """The Hough stage on a cluttered frame, lecture settings and improved perception."""
-    from lane_control import ImprovedController
+    """The Hough stage on cluttered frames: the lecture's settings (never bounded), and the
+    improved perception with and without its max_edge_fraction bound."""
+    from lane_control import ImprovedController, ImprovedParams
+
+    def timed(make, frame):
+        clock = StageClock()
+        perceive = make(clock.mark)
+        for _ in range(repeats):
+            det = perceive(frame)
+        return dict(hough=stats(clock.times['hough']), total=stats(clock.times['total']),
+                    segments=int(len(det.lines)), skipped=bool(det.cluttered))
+
+    def lecture(mark):
+        pipeline = Pipeline(LaneParams(), mark=mark)
+        return lambda frame: pipeline(frame, LECTURE_CAMERA)
+
+    def improved(bound):
+        def make(mark):
+            c = ImprovedController(LaneParams(), ImprovedParams(max_edge_fraction=bound))
+            c.pipeline.mark = mark
+            return lambda frame: c.perceive(frame, LECTURE_CAMERA)
+        return make
 
     frame = cluttered_frame()
-    out = {}
-    lecture = StageClock()
-    pipe = Pipeline(LaneParams(), mark=lecture.mark)
-    improved = ImprovedController(LaneParams())
-    imp_clock = StageClock()
-    improved.pipeline.mark = imp_clock.mark
-    for _ in range(repeats):
-        pipe(frame, LECTURE_CAMERA)
-        det = improved.perceive(frame, LECTURE_CAMERA)
-    out['lecture'] = dict(hough=stats(lecture.times['hough']), total=stats(lecture.times['total']),
-                          segments=int(len(pipe(frame, LECTURE_CAMERA).lines)))
-    out['improved'] = dict(hough=stats(imp_clock.times['hough']),
-                           total=stats(imp_clock.times['total']), segments=int(len(det.lines)))
+    out = dict(lecture=timed(lecture, frame), improved_unbounded=timed(improved(1.0), frame),
+               improved=timed(improved(ImprovedParams().max_edge_fraction), frame))
+    # the slowest frame the bound still lets through: lines only, ever more of them
+    through = [timed(improved(ImprovedParams().max_edge_fraction), cluttered_frame(n, lines=n,
+                                                                                texture=False))
+               for n in (100, 200, 400, 800, 1600)]
+    through = [t for t in through if not t['skipped']]
+    out['improved_worst_read'] = max(through, key=lambda t: t['hough']['median_ms'])
     return out
 
 
@@ -400,6 +428,8 @@ def main(argv=None):
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ['--literal-dry-run']:
         return literal_dry_run(argv[1:])
+    if argv[:1] == ['--memory-child']:
+        return memory_child(int(argv[1]))
     args = build_parser().parse_args(argv)
     if args.json and not os.path.isdir(os.path.dirname(os.path.abspath(args.json))):
         print(f"bench.py: error: --json '{args.json}': folder does not exist", file=sys.stderr)
@@ -431,7 +461,7 @@ def main(argv=None):
     for name, w in report['worst_case'].items():
         print(f"cluttered frame, {name}: Hough median {w['hough']['median_ms']} ms "
               f"(p95 {w['hough']['p95_ms']}), whole pipeline {w['total']['median_ms']} ms, "
-              f"{w['segments']} segments")
+              f"{w['segments']} segments{' (not read: too many edges)' if w['skipped'] else ''}")
     if not args.quick:
         os.makedirs(OUT, exist_ok=True)
         video = make_video(frames, args.video_frames,
@@ -441,7 +471,7 @@ def main(argv=None):
               f"{tp['project']['fps']} frames/s ({tp['project']['seconds']} s), literal "
               f"{tp['literal']['fps']} frames/s ({tp['literal']['seconds']} s): "
               f"{tp['project']['fps'] / tp['literal']['fps']:.2f}x")
-        report['memory'] = mem = memory(frames, args.soak)
+        report['memory'] = mem = memory(args.soak)
         print(f"memory: RSS {mem['rss_1000_mb']} MB after 1,000 frames, {mem['rss_end_mb']} MB "
               f"after {mem['frames']:,}: growth {mem['growth_mb']} MB; peak RSS "
               f"{mem['peak_rss_mb']} MB")

@@ -164,8 +164,10 @@ class Detection:
     pictures need the whole of it); stages: intermediate images, only when asked for.
     """
 
-    def __init__(self, lines, slopes, image=None, stages=None, make_image=None):
+    def __init__(self, lines, slopes, image=None, stages=None, make_image=None,
+                 cluttered=False):
         self.lines, self.slopes, self.stages = lines, slopes, stages
+        self.cluttered = cluttered  # too many edges to read; Hough was skipped
         self._image, self._make_image = image, make_image
 
     @property
@@ -199,6 +201,7 @@ class Layout:
         rows = (np.flatnonzero(self.mask.any(axis=1)) if self.mask is not None
                 else np.arange(height))
         self.top, self.bottom = (int(rows[0]), int(rows[-1]) + 1) if rows.size else (0, 0)
+        self.area = cv2.countNonZero(self.mask) if self.mask is not None else width * height
         # an edge pixel depends on the blurred pixels 2 px away (Sobel, then non-maximum
         # suppression) and those on the gray ones blur_kernel // 2 px away
         self.margin = p.blur_kernel // 2 + 3
@@ -256,9 +259,12 @@ class Pipeline:
     kept for pictures, the whole frame is processed.
     """
 
-    def __init__(self, p, mark=None):
+    def __init__(self, p, mark=None, max_edge_fraction=None):
         self.p = p
         self.mark = mark or (lambda stage: None)  # called after each stage (bench.py times them)
+        # None (the lecture): Hough always runs. A fraction: masks with more edge pixels than
+        # that are not read, which bounds Hough's time on dense texture (improved controller)
+        self.max_edge_fraction = max_edge_fraction
         self._layout = None
 
     def layout(self, width, height, camera, roi):
@@ -294,17 +300,20 @@ class Pipeline:
                             dst=lay.edges[top:bottom])
             masked = lay.edges
         mark('roi')
-        lines = hough_lines(masked, p)
+        cluttered = (self.max_edge_fraction is not None and
+                     cv2.countNonZero(masked) > self.max_edge_fraction * lay.area)
+        lines = np.empty((0, 4), np.int32) if cluttered else hough_lines(masked, p)
         mark('hough')
         slopes = slope_sum(lines, p.slope_min)
         mark('slopes')
         if keep_stages:
             stages = dict(raw=raw, undistorted=image, gray=gray, blurred=blurred, edges=edged,
                           masked=masked)
-            return Detection(lines, slopes, image, stages)
+            return Detection(lines, slopes, image, stages, cluttered=cluttered)
         if whole:
-            return Detection(lines, slopes, image)
-        return Detection(lines, slopes, make_image=lambda: lay.undistort(raw))
+            return Detection(lines, slopes, image, cluttered=cluttered)
+        return Detection(lines, slopes, make_image=lambda: lay.undistort(raw),
+                         cluttered=cluttered)
 
 
 def detect(frame, camera, p, keep_stages=False, roi=None):

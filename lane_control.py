@@ -56,6 +56,10 @@ class ImprovedParams:
                                               finite)
     max_line_gap_improved: float = setting(10.0, 'HoughLinesP maxLineGap, improved', 'px',
                                            finite)
+    max_edge_fraction: float = setting(0.15, 'a frame whose floor mask is more than this '
+                                       'fraction edge pixels (dense texture) is not read: Hough '
+                                       'is skipped, which bounds the time per frame', '',
+                                       fraction)
     max_segments: int = setting(60, 'at most this many segments used per frame (the longest); '
                                 'bounds the work on cluttered frames', '', positive)
     smoothing: float = setting(0.6, 'weight of a full-confidence measurement against the '
@@ -240,9 +244,10 @@ class ImprovedController:
         self.estimate = None
         self.lost_for = math.inf  # [s] since the lane was last seen
         self.last = (0.0, 0.0)  # the last command (v, omega)
+        self.cluttered = False  # the last frame had too many edges to read
         self._matrix = None
         self._roi = {}  # mask per (camera, width, height)
-        self.pipeline = Pipeline(self.detect_params)
+        self.pipeline = Pipeline(self.detect_params, max_edge_fraction=self.p.max_edge_fraction)
 
     def perceive(self, frame, camera):
         h, w = frame.shape[:2]
@@ -256,6 +261,7 @@ class ImprovedController:
 
     def __call__(self, detection):
         p = self.p
+        self.cluttered = detection.cluttered
         prior = predict(self.estimate, *self.last, self.dt) if self.estimate else None
         meas = measure(detection.lines, self._matrix, p, prior)
         if meas is not None:
@@ -278,7 +284,7 @@ class ImprovedController:
         e = self.estimate
         if e is None:
             return dict(offset_m=None, heading_rad=None, curvature=None, confidence=0.0,
-                        lane_lost_s=None)
+                        lane_lost_s=None, cluttered=self.cluttered)
         return dict(offset_m=round(e.offset, 4), heading_rad=round(e.heading, 4),
                     curvature=round(e.curvature, 4), confidence=round(e.confidence, 3),
-                    lane_lost_s=round(min(self.lost_for, 1e6), 3))
+                    lane_lost_s=round(min(self.lost_for, 1e6), 3), cluttered=self.cluttered)

@@ -79,3 +79,14 @@ def test_frame_size_and_camera_changes_rebuild_the_layout(frames):
     c = Pipeline(LaneParams())(small, None).lines
     d = pipeline(small, None).lines
     assert np.array_equal(a, b) and np.array_equal(c, d)
+
+
+def test_improved_perception_does_not_read_dense_texture(frames):
+    improved = ImprovedController(LaneParams())
+    cluttered = improved.perceive(cluttered_frame(4), LECTURE_CAMERA)
+    assert cluttered.cluttered and len(cluttered.lines) == 0
+    assert improved(cluttered).decision == 'none'  # no lane seen yet: stopped
+    tape = improved.perceive(frames[0], LECTURE_CAMERA)
+    assert not tape.cluttered and len(tape.lines) > 0
+    # the lecture's pipeline has no such bound
+    assert len(Pipeline(LaneParams())(cluttered_frame(4), LECTURE_CAMERA).lines) > 0
