@@ -36,7 +36,6 @@ import json
 import math
 import os
 import platform
-import resource
 import subprocess
 import sys
 import time
@@ -300,9 +299,10 @@ def throughput(video, count):
     return result
 
 
-def rss_mb():
-    with open('/proc/self/statm') as f:
-        return int(f.read().split()[1]) * os.sysconf('SC_PAGE_SIZE') / 2**20
+def rss_mb(field='VmRSS'):
+    """This process's resident memory (VmRSS) or its peak (VmHWM) in MB, from /proc."""
+    with open('/proc/self/status') as f:
+        return next(int(line.split()[1]) for line in f if line.startswith(field + ':')) / 1024
 
 
 def memory_child(count):
@@ -324,7 +324,7 @@ def memory_child(count):
     with open(os.path.join(OUT, 'soak_decisions.jsonl'), 'w') as decisions:
         LaneFollower(ros, Twist, Looped([]), LaneParams(), LECTURE_CAMERA,
                      decisions=decisions).run()
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    peak = rss_mb('VmHWM')  # ru_maxrss would carry the parent's peak over exec
     print(json.dumps(dict(frames=count, rss_1000_mb=round(marks[1000], 1),
                           rss_end_mb=round(marks[count], 1),
                           growth_mb=round(marks[count] - marks[1000], 2),

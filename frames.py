@@ -35,6 +35,7 @@ class CaptureSource:
         self.skipped = 0
         self._index = 0
         self.total = None
+        self._arg = capture_arg
         self._cap = cv2.VideoCapture(capture_arg)
         if not self._cap.isOpened():
             self._cap.release()
@@ -52,6 +53,12 @@ class CaptureSource:
         label = self._index
         self._index += 1
         return True, frame, label
+
+    def reopen(self):
+        """Open the camera or stream again (after it stopped giving frames); True if it opened."""
+        self._cap.release()
+        self._cap = cv2.VideoCapture(self._arg)
+        return self._cap.isOpened()
 
     def release(self):
         self._cap.release()

@@ -442,6 +442,39 @@ class Progress:
             self.stream.write('\n')
 
 
+def below_kobuki_timeout(x):
+    return math.isfinite(x) and 0 < x <= 0.5
+
+
+@dataclass
+class Safety:
+    """How the loop protects the robot. Not the lecture's (it had none), so not in LaneParams."""
+
+    watchdog: float = setting(0.4, 'no command for this long (a slow frame or camera): publish '
+                              'a stop, and again as long as it lasts; a frame that took longer '
+                              'to process is acted on with a stop. At most 0.5, below the '
+                              "Kobuki driver's 0.6 s command timeout", 's', below_kobuki_timeout)
+    watchdog_check: float = setting(0.1, 'how often the watchdog looks', 's',
+                                    below_kobuki_timeout)
+    camera_retry: float = setting(5.0, 'a live camera that stops giving frames is reopened for '
+                                  'this long before the run ends (exit status 1)', 's', finite)
+    max_errors: int = setting(5, 'this many frames in a row failing in the pipeline end the run '
+                              '(exit status 1)', 'frames', positive)
+
+
+KOBUKI_MAX_LINEAR = 0.7  # [m/s] the Kobuki's top speed
+KOBUKI_MAX_ANGULAR = math.pi  # [rad/s] the Kobuki's top turn rate
+
+
+def safe(command):
+    """The command within the Kobuki's limits; anything not finite becomes a stop."""
+    if not (math.isfinite(command.linear_x) and math.isfinite(command.angular_z)):
+        return STOP
+    return Command(command.decision,
+                   min(max(command.linear_x, -KOBUKI_MAX_LINEAR), KOBUKI_MAX_LINEAR),
+                   min(max(command.angular_z, -KOBUKI_MAX_ANGULAR), KOBUKI_MAX_ANGULAR))
+
+
 class LaneFollower:
     """Owns the publisher, the rate and the frame source; one command per loop iteration.
 
@@ -449,19 +482,26 @@ class LaneFollower:
     """
 
     def __init__(self, ros, twist_type, source, params, camera, controller=None,
-                 decisions=None, video=None, show=False, progress=None, wait_for_base=0.0):
+                 decisions=None, video=None, show=False, progress=None, wait_for_base=0.0,
+                 safety=None):
         self.ros, self.twist_type, self.source = ros, twist_type, source
         self.p, self.camera = params, camera
         self.controller = controller or LectureRule(params)
         self.decisions, self.video, self.show = decisions, video, show
         self.progress = progress or Progress(None, False)
         self.wait_for_base = wait_for_base
+        self.safety = safety or Safety()
         self.counts = dict(left=0, right=0, straight=0, none=0)
         self.frames = 0
+        self.errors = 0  # pipeline failures in a row
+        self.watchdog_stops = 0
         self.ended = None  # why the loop ended
         self.stop_requested = None
+        self.hold = None  # while set (e.g. 'ROS master lost'), every command is a stop
         self._lock = threading.Lock()
         self._stopped = False
+        self._last_sent = None  # ros time of the last command published
+        self._stalled = False
         self._pub = ros.Publisher(TOPIC, twist_type, queue_size=1)
         ros.on_shutdown(self.stop_robot)
 
@@ -474,7 +514,26 @@ class LaneFollower:
         with self._lock:
             if self._stopped:
                 return  # never move again once the stop has been sent
-            self._pub.publish(make_twist(self.twist_type, command))
+            self._pub.publish(make_twist(self.twist_type, safe(command)))
+            self._last_sent = self.ros.get_time()
+
+    def _watchdog(self, _event):
+        """Runs on a timer: a stop whenever the loop has not published for too long."""
+        now = self.ros.get_time()
+        with self._lock:
+            if self._stopped or self._last_sent is None:
+                return
+            if now - self._last_sent < self.safety.watchdog:
+                self._stalled = False
+                return
+            self._pub.publish(make_twist(self.twist_type, STOP))
+            self._last_sent = now
+            self.watchdog_stops += 1
+            first = not self._stalled
+            self._stalled = True
+        if first:
+            self.ros.logwarn('no command for %.1f s (slow frame or camera): robot stopped',
+                             self.safety.watchdog)
 
     def stop_robot(self):
         """Publish a zero Twist once; later commands are refused. Safe from any thread."""
@@ -487,10 +546,18 @@ class LaneFollower:
             except self.ros.ROSException as e:  # topic already closed by a ROS shutdown
                 self.ros.logwarn('could not publish the final stop: %s', e)
 
-    def step(self, frame, label):
-        """Process one frame and publish its command; returns the decision record."""
+    def step(self, frame, label, read_at=None):
+        """Process one frame and publish its command; returns the decision record.
+
+        read_at: ros time the frame arrived; a result ready more than watchdog seconds later
+        is stale, and the robot is stopped instead."""
+        read_at = self.ros.get_time() if read_at is None else read_at
         detection = self.controller.perceive(frame, self.camera)
         command = self.controller(detection)
+        late = self.ros.get_time() - read_at > self.safety.watchdog
+        held = self.hold
+        if late or held:
+            command = STOP
         self._publish(command)
         s = detection.slopes
         record = dict(frame=self.frames, source=label, lines=int(len(detection.lines)),
@@ -499,19 +566,39 @@ class LaneFollower:
                       angular_z=command.angular_z, t=round(self.ros.get_time(), 6),
                       left_count=s.left_count, right_count=s.right_count, vertical=s.vertical,
                       **self.controller.extra())
+        if late:
+            record['late'] = True
+        if held:
+            record['held'] = held
         self.counts[command.decision] += 1
         self.frames += 1
         self.ros.loginfo('frame %d (%s): %d lines, theta %+.3f, value %+.3f -> %s '
-                         '(linear.x %.2f, angular.z %+.2f)', record['frame'], label,
+                         '(linear.x %.2f, angular.z %+.2f)%s', record['frame'], label,
                          record['lines'], s.theta, s.value, command.decision,
-                         command.linear_x, command.angular_z)
-        if self.decisions is not None:
-            self.decisions.write(json.dumps(record) + '\n')
-            self.decisions.flush()
+                         command.linear_x, command.angular_z,
+                         ' [late: stopped]' if late else f' [{held}: stopped]' if held else '')
+        self._write(record)
         if self.video is not None or self.show:
             self._picture(annotate(detection, command, self.p))
         self.progress.update(self.frames)
         return record
+
+    def _write(self, record):
+        if self.decisions is not None:
+            self.decisions.write(json.dumps(record) + '\n')
+            self.decisions.flush()
+
+    def _failed(self, label, error):
+        """A frame the pipeline could not process: log it, stop the robot, go on."""
+        self.errors += 1
+        self._publish(STOP)
+        self.ros.logerr('frame %d (%s): %s: %s; robot stopped (%d in a row)', self.frames, label,
+                        type(error).__name__, error, self.errors)
+        self._write(dict(frame=self.frames, source=label, decision='none',
+                         error=f'{type(error).__name__}: {error}',
+                         t=round(self.ros.get_time(), 6)))
+        self.counts['none'] += 1
+        self.frames += 1
 
     def _picture(self, image):
         if self.video is not None:
@@ -529,11 +616,31 @@ class LaneFollower:
             self.ros.logwarn('nothing subscribes to %s yet (is minimal.launch running?); '
                              'publishing anyway', TOPIC)
 
+    def _camera_back(self, since):
+        """After a failed read from a live source: stop, then reopen it until it gives frames
+        again or camera_retry seconds have passed since the first failure."""
+        ros = self.ros
+        self._publish(STOP)
+        if ros.get_time() - since > self.safety.camera_retry:
+            return False
+        ros.logwarn("no frame from '%s': robot stopped; reopening it (for up to %.0f s)",
+                    self.source.name, self.safety.camera_retry)
+        while ros.get_time() - since <= self.safety.camera_retry:
+            if self.stop_requested or ros.is_shutdown():
+                return True  # the loop ends for that reason instead
+            ros.sleep(1.0)
+            if self.source.reopen():
+                ros.loginfo("reopened '%s'", self.source.name)
+                return True
+        return False
+
     def run(self):
         """The lecture's main loop, at a steady rate, ending with the robot stopped."""
         ros = self.ros
         self._await_base()
         rate = ros.Rate(self.p.rate)
+        timer = ros.Timer(ros.Duration(self.safety.watchdog_check), self._watchdog)
+        lost_since = None
         try:
             while self.ended is None:
                 if ros.is_shutdown():
@@ -544,14 +651,30 @@ class LaneFollower:
                     break
                 ok, frame, label = self.source.read()
                 if not ok:
-                    self.ended = 'camera lost' if self.source.live else 'end of input'
-                    break
-                self.step(frame, label)
+                    if not self.source.live:
+                        self.ended = 'end of input'
+                        break
+                    lost_since = ros.get_time() if lost_since is None else lost_since
+                    if not self._camera_back(lost_since):
+                        self.ended = 'camera lost'
+                    continue
+                lost_since = None
+                try:
+                    self.step(frame, label, ros.get_time())
+                    self.errors = 0
+                except ros.ROSInterruptException:
+                    raise
+                except Exception as e:  # one bad frame must not leave the robot moving
+                    self._failed(label, e)
+                    if self.errors >= self.safety.max_errors:
+                        self.ended = 'pipeline errors'
+                        break
                 # fixed: the lecture sleeps only in its straight branch; every branch keeps 4 Hz
                 rate.sleep()
         except ros.ROSInterruptException:
             self.ended = 'ROS shutdown'
         finally:
+            timer.shutdown()
             # fixed: nothing stopped the robot when the lecture's loop ended; always stop
             self.stop_robot()
             self.progress.done()
@@ -561,7 +684,7 @@ class LaneFollower:
 # ---------------------------------------------------------------- wiring
 
 EXIT_STATUS = {'end of input': 0, 'ROS shutdown': 0, 'q pressed': 0, 'camera lost': 1,
-               'SIGINT': 130, 'SIGTERM': 143}
+               'pipeline errors': 1, 'SIGINT': 130, 'SIGTERM': 143}
 
 
 def split_ros_args(argv):
@@ -616,6 +739,7 @@ def build_parser():
 
     add_arguments(parser.add_argument_group('the improved controller (--controller improved)'),
                   ImprovedParams)
+    add_arguments(parser.add_argument_group('safety'), Safety)
     return parser
 
 
@@ -736,6 +860,7 @@ def main(argv=None):
         ros, twist_type = connect_ros()
     try:
         params = resolve(LaneParams, args, ros.get_param)
+        safety = resolve(Safety, args, ros.get_param)
         controller = make_controller(args, params, ros.get_param)
     except (ValueError, TypeError) as e:
         parser.error(str(e))
@@ -753,7 +878,8 @@ def main(argv=None):
                             decisions=decisions,
                             video=video, show=args.show,
                             progress=Progress(source.total, show_progress),
-                            wait_for_base=0.0 if args.dry_run else args.wait_for_base)
+                            wait_for_base=0.0 if args.dry_run else args.wait_for_base,
+                            safety=safety)
     install_signal_handlers(follower)
     ros.loginfo('kobuki_lane: source %s, %s controller, algorithm %s, calibration %s, %.1f Hz '
                 'on %s%s', source.name, controller.name, params.algorithm, args.calibration,

@@ -1,10 +1,11 @@
 """A thin stand-in for rospy and geometry_msgs/Twist, so the node's loop runs with no ROS at all.
 
-It offers only the calls kobuki_lane.py makes (init_node, Publisher, Rate, is_shutdown,
-on_shutdown, signal_shutdown, get_param, get_time, loginfo/logwarn/logerr,
+It offers only the calls kobuki_lane.py makes (init_node, Publisher, Rate, Timer, Duration,
+is_shutdown, on_shutdown, signal_shutdown, get_param, get_time, sleep, loginfo/logwarn/logerr,
 ROSInterruptException) with rospy's semantics, on a clock you choose:
 
-    SimClock()   simulated time: Rate.sleep() advances it instantly (tests, fast dry runs)
+    SimClock()   simulated time: Rate.sleep() advances it instantly, firing timers on the way
+                 (tests, fast dry runs, the simulator)
     WallClock()  real time: Rate.sleep() really sleeps (dry runs with --realtime)
 
 Published messages are recorded in `StandInRospy.published` as (time_s, topic, message)
@@ -15,6 +16,7 @@ real subscriber receives matches, so the two cannot drift apart.
 """
 
 import sys
+import threading
 import time
 from collections import deque
 from dataclasses import dataclass, field
@@ -43,22 +45,48 @@ class ROSInterruptException(ROSException, KeyboardInterrupt):
     """Raised by Rate.sleep() once shutdown has been signalled, as in rospy."""
 
 
+class Duration:
+    """rospy.Duration, as far as Timer needs it."""
+
+    def __init__(self, secs):
+        self.secs = float(secs)
+
+    def to_sec(self):
+        return self.secs
+
+
 class SimClock:
-    """Simulated time in seconds; sleeping advances it at once."""
+    """Simulated time in seconds; sleeping advances it at once, firing any timers due on the
+    way, in time order (so a slow read or frame can be simulated with clock.sleep)."""
 
     def __init__(self, start=0.0):
         self.t = start
+        self.timers = []
 
     def now(self):
         return self.t
 
     def sleep(self, seconds):
-        if seconds > 0:
-            self.t += seconds
+        if seconds <= 0:
+            return
+        end = self.t + seconds
+        while True:
+            due = [timer for timer in self.timers if timer.due <= end and not timer.stopped]
+            if not due:
+                break
+            timer = min(due, key=lambda tm: tm.due)
+            self.t = max(self.t, timer.due)
+            timer.due += timer.period
+            timer.callback(None)
+        self.t = end
+
+    def start_timer(self, timer):
+        timer.due = self.t + timer.period
+        self.timers.append(timer)
 
 
 class WallClock:
-    """Real monotonic time."""
+    """Real monotonic time; timers run on their own threads, as rospy's do."""
 
     def now(self):
         return time.monotonic()
@@ -66,6 +94,29 @@ class WallClock:
     def sleep(self, seconds):
         if seconds > 0:
             time.sleep(seconds)
+
+    def start_timer(self, timer):
+        def run():
+            while not timer.stopped:
+                time.sleep(timer.period)
+                if not timer.stopped:
+                    timer.callback(None)
+
+        threading.Thread(target=run, name='timer', daemon=True).start()
+
+
+class Timer:
+    """rospy.Timer: callback(event) every period (a Duration) on the stand-in's clock."""
+
+    def __init__(self, clock, period, callback):
+        self.period = period.to_sec()
+        self.callback = callback
+        self.stopped = False
+        self.due = None
+        clock.start_timer(self)
+
+    def shutdown(self):
+        self.stopped = True
 
 
 class Rate:
@@ -156,6 +207,11 @@ class StandInRospy:
 
     def Rate(self, hz):
         return Rate(self, hz)
+
+    Duration = Duration
+
+    def Timer(self, period, callback):
+        return Timer(self.clock, period, callback)
 
     def get_time(self):
         return self.clock.now()

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from frames import ListSource
-from kobuki_lane import Command, LaneFollower, LaneParams, LectureRule
+from kobuki_lane import Command, LaneFollower, LaneParams, LectureRule, safe
 from rospy_standin import SimClock, StandInRospy, Twist
 
 
@@ -19,6 +19,9 @@ class ScriptedSource(ListSource):
     def read(self):
         self._on_read(self._next)
         return super().read()
+
+    def reopen(self):
+        return False
 
 
 class Scripted(LectureRule):
@@ -73,14 +76,100 @@ def test_slow_frames_do_not_slow_the_rate_and_a_stall_is_caught_up_like_rospy():
         clock_holder['ros'].clock.sleep(0.6 if i == 3 else 0.1)
 
     ros, follower = make(ScriptedSource(blank_frames(8), on_read=slow))
+    follower.controller = Scripted(lambda d: Command('straight', 0.05, 0.0))
     clock_holder['ros'] = ros
     follower.run()
-    times = np.array([t for t, _, _ in twists(ros)[:8]])
+    times = np.array([t for t, x, _ in twists(ros) if x == 0.05])
     # each read takes 0.1 s, so frame k is published at 0.25 k + 0.1 while on schedule
     assert np.allclose(times[:3], [0.1, 0.35, 0.6])
     assert times[3] == pytest.approx(1.35)  # the 0.6 s stall
     assert np.allclose(np.diff(times[3:6]), 0.1)  # no sleep while behind: catching up
     assert times[7] == pytest.approx(0.25 * 7 + 0.1)  # back on the original schedule
+    # during the stall the watchdog stopped the robot 0.4 s after the last command
+    stops = [t for t, x, _ in twists(ros) if x == 0.0 and 0.6 < t < 1.35]
+    assert stops and stops[0] == pytest.approx(1.0, abs=0.11)
+
+
+def gaps(ros):
+    times = [t for t, _, _ in twists(ros)]
+    return np.diff(times)
+
+
+def test_the_watchdog_keeps_commands_coming_while_the_camera_stalls():
+    holder = {}
+    ros, follower = make(ScriptedSource(
+        blank_frames(6), on_read=lambda i: holder['ros'].clock.sleep(3.0 if i == 2 else 0.0)))
+    follower.controller = Scripted(lambda d: Command('left', 0.05, 0.5))
+    holder['ros'] = ros
+    follower.run()
+    safety = follower.safety
+    assert gaps(ros).max() <= safety.watchdog + safety.watchdog_check + 1e-9
+    during = [(x, z) for t, x, z in twists(ros) if 0.5 < t < 3.5]
+    assert len(during) >= 6 and all(c == (0.0, 0.0) for c in during)  # stopped, not turning
+    assert follower.watchdog_stops == len(during)
+    assert any('no command for' in text for _, text in ros.log_lines)
+
+
+def test_a_frame_that_takes_too_long_is_acted_on_with_a_stop():
+    holder = {}
+
+    class Slow(Scripted):
+        def perceive(self, frame, camera):
+            if holder['f'].frames == 2:
+                holder['ros'].clock.sleep(1.0)  # a pathological frame
+            return super().perceive(frame, camera)
+
+    ros, follower = make(ListSource(blank_frames(5)))
+    follower.controller = Slow(lambda d: Command('right', 0.05, -0.5))
+    holder.update(f=follower, ros=ros)
+    records = []
+    follower._write = records.append
+    follower.run()
+    assert [r.get('late', False) for r in records] == [False, False, True, False, False]
+    assert records[2]['decision'] == 'none' and records[2]['angular_z'] == 0.0
+    assert gaps(ros).max() <= 0.5 + 1e-9
+
+
+class Flaky(ScriptedSource):
+    """A live camera whose reads fail from frame `fail_at` until it is reopened `after` times."""
+
+    def __init__(self, frames, fail_at, reopen_ok_after):
+        super().__init__(frames, live=True)
+        self.fail_at, self.reopen_ok_after, self.reopens = fail_at, reopen_ok_after, 0
+
+    def read(self):
+        if self._next == self.fail_at and self.reopens < self.reopen_ok_after:
+            return False, None, self._next
+        return super().read()
+
+    def reopen(self):
+        self.reopens += 1
+        return self.reopens >= self.reopen_ok_after
+
+
+def test_a_camera_that_comes_back_is_reopened_and_driving_resumes():
+    source = Flaky(blank_frames(8), fail_at=3, reopen_ok_after=2)
+    ros, follower = make(source)
+    follower.controller = Scripted(lambda d: Command('straight', 0.05, 0.0))
+    assert follower.run() == 'camera lost'  # the frames run out at the end; live, so lost
+    out = twists(ros)
+    # frames 0-2, a stop at once (same time as the failed read), then frames 3.. after reopening
+    assert [x for _, x, _ in out[:4]] == [0.05, 0.05, 0.05, 0.0]
+    assert out[3][0] - out[2][0] <= 0.25 + 1e-9
+    assert source.reopens >= 2
+    assert sum(1 for _, x, _ in out if x == 0.05) == 8
+
+
+def test_a_camera_that_stays_lost_ends_the_run_after_the_retry_time():
+    source = Flaky(blank_frames(8), fail_at=2, reopen_ok_after=10**6)
+    ros, follower = make(source)
+    follower.controller = Scripted(lambda d: Command('straight', 0.05, 0.0))
+    assert follower.run() == 'camera lost'
+    out = twists(ros)
+    failed_at = out[2][0]
+    assert all(x == 0.0 for _, x, _ in out[2:])  # never moves again
+    assert out[-1][0] - failed_at >= follower.safety.camera_retry
+    assert gaps(ros).max() <= 0.5 + 1e-9  # stops kept coming while it retried
 
 
 def test_camera_loss_ends_with_a_stop():
@@ -116,7 +205,7 @@ def test_ros_shutdown_mid_run_publishes_the_stop_from_the_hook():
     assert len(out) == 4 and out[-1][1:] == (0.0, 0.0)
 
 
-def test_an_exception_in_the_pipeline_still_stops_the_robot():
+def test_an_exception_on_one_frame_stops_the_robot_and_the_loop_goes_on():
     ros, follower = make(ListSource(blank_frames(5)))
 
     def broken(detection):
@@ -125,10 +214,36 @@ def test_an_exception_in_the_pipeline_still_stops_the_robot():
         return Command('straight', 0.05, 0.0)
 
     follower.controller = Scripted(broken)
-    with pytest.raises(RuntimeError):
-        follower.run()
-    out = twists(ros)
-    assert len(out) == 3 and out[-1][1:] == (0.0, 0.0)
+    records = []
+    follower._write = records.append
+    assert follower.run() == 'end of input'
+    assert [x for _, x, _ in twists(ros)] == [0.05, 0.05, 0.0, 0.05, 0.05, 0.0]
+    assert records[2]['error'] == 'RuntimeError: boom' and records[2]['decision'] == 'none'
+    assert any('RuntimeError: boom' in text for level, text in ros.log_lines if level == 'ERROR')
+
+
+def test_repeated_exceptions_end_the_run():
+    ros, follower = make(ListSource(blank_frames(20)))
+
+    def broken(detection):
+        raise ValueError('bad frame')
+
+    follower.controller = Scripted(broken)
+    assert follower.run() == 'pipeline errors'
+    assert follower.frames == follower.safety.max_errors
+    assert all(x == 0.0 for _, x, _ in twists(ros))
+
+
+@pytest.mark.parametrize('command, expected', [
+    (Command('left', float('nan'), 0.1), (0.0, 0.0)),
+    (Command('left', 0.1, float('inf')), (0.0, 0.0)),
+    (Command('left', 5.0, -10.0), (0.7, -np.pi)),
+    (Command('right', -5.0, 10.0), (-0.7, np.pi)),
+    (Command('straight', 0.05, 0.0), (0.05, 0.0)),
+])
+def test_commands_are_kept_within_the_kobuki_limits(command, expected):
+    c = safe(command)
+    assert (c.linear_x, c.angular_z) == pytest.approx(expected)
 
 
 def test_decision_records_have_the_documented_keys():
