@@ -81,10 +81,10 @@ class FolderSource:
         while self._next < len(self._files):
             path = self._files[self._next]
             self._next += 1
-            frame = cv2.imread(path, cv2.IMREAD_UNCHANGED)
+            frame = None if truncated(path) else cv2.imread(path, cv2.IMREAD_UNCHANGED)
             if frame is None or frame.size == 0:
                 self.skipped += 1
-                self._warn(f'skipped {path}: not a readable image')
+                self._warn(f'skipped {path}: not a readable image (corrupt or truncated)')
                 continue
             return True, frame, os.path.basename(path)
         return False, None, None
@@ -172,6 +172,19 @@ def is_image_file(path):
     return path.lower().endswith(IMAGE_EXTENSIONS)
 
 
+def truncated(path):
+    """True if a JPEG or PNG file stops before its end marker (OpenCV would decode the part
+    that is there and fill the rest with grey, without a word)."""
+    ending = {'.jpg': b'\xff\xd9', '.jpeg': b'\xff\xd9', '.png': b'IEND\xaeB`\x82'}
+    marker = ending.get(os.path.splitext(path)[1].lower())
+    if marker is None:
+        return False
+    with open(path, 'rb') as f:
+        f.seek(0, os.SEEK_END)
+        f.seek(max(f.tell() - 64, 0))
+        return marker not in f.read()
+
+
 def open_source(spec, warn=None):
     """Open what --source names; SourceError if it cannot be opened."""
     spec = str(spec)
@@ -197,5 +210,7 @@ def open_source(spec, warn=None):
     if is_image_file(spec):
         if cv2.imread(spec, cv2.IMREAD_UNCHANGED) is None:
             raise SourceError(f"cannot open '{spec}': not a readable image")
+        if truncated(spec):
+            raise SourceError(f"cannot open '{spec}': the image is truncated")
         return FolderSource(spec, [spec], warn)
     return CaptureSource(spec, spec, live=False)

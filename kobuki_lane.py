@@ -900,6 +900,16 @@ def main(argv=None):
     if ended == 'camera lost':
         print(f"kobuki_lane.py: error: camera lost: no frame from '{source.name}'",
               file=sys.stderr)
+    if ended == 'pipeline errors':
+        print(f'kobuki_lane.py: error: {follower.errors} frames in a row failed in the '
+              'pipeline (see the log above)', file=sys.stderr)
+    if ended == 'end of input' and follower.frames == 0:
+        fail(f"no frame could be read from '{source.name}' (corrupt, truncated or an "
+             'unsupported format?)')
+    read = follower.frames + source.skipped
+    if ended == 'end of input' and source.total and read < source.total - 1:
+        ros.logwarn('the input ended after %d of its %d frames (truncated?)',
+                    read, source.total)
     return EXIT_STATUS.get(ended, 0)
 
 

@@ -230,3 +230,60 @@ def test_controller_and_its_gains_from_private_params(tmp_path):
     assert max(r['linear_x'] for r in records) <= 0.2
     proc = cli('--source', SAMPLES, '--dry-run', '_controller:=clever')
     assert proc.returncode == 2 and 'controller must be lecture or improved' in proc.stderr
+
+
+def test_a_folder_of_nothing_readable_is_an_error_not_an_empty_run(tmp_path):
+    (tmp_path / 'a.jpg').write_bytes(b'not a jpeg')
+    (tmp_path / 'b.png').write_bytes(b'\x89PNG\r\n')
+    proc = cli('--source', str(tmp_path), '--dry-run', '--quiet')
+    assert proc.returncode == 2 and 'no frame could be read' in proc.stderr
+    assert 'Traceback' not in proc.stderr
+
+
+def test_truncated_images_are_refused_or_skipped(tmp_path):
+    data = open(os.path.join(SAMPLES, '000_A.jpg'), 'rb').read()
+    (tmp_path / 'cut.jpg').write_bytes(data[:len(data) // 2])
+    shutil.copy(os.path.join(SAMPLES, '001_A.jpg'), tmp_path / 'whole.jpg')
+    proc = cli('--source', str(tmp_path / 'cut.jpg'), '--dry-run')
+    assert proc.returncode == 2 and 'truncated' in proc.stderr
+    proc = cli('--source', str(tmp_path), '--dry-run', '--quiet')
+    assert proc.returncode == 0 and '1 frames (1 skipped)' in proc.stderr
+    assert 'cut.jpg' in proc.stderr
+
+
+def test_a_truncated_video_is_read_as_far_as_it_goes(tmp_path):
+    path = str(tmp_path / 'v.avi')
+    writer = cv2.VideoWriter(path, cv2.VideoWriter_fourcc(*'MJPG'), 4, (640, 480))
+    for name in sorted(os.listdir(SAMPLES))[:20]:
+        writer.write(cv2.imread(os.path.join(SAMPLES, name)))
+    writer.release()
+    data = open(path, 'rb').read()
+    cut = tmp_path / 'cut.avi'
+    cut.write_bytes(data[:len(data) // 2])
+    proc = cli('--source', str(cut), '--dry-run', '--quiet')
+    assert proc.returncode == 0 and 'Traceback' not in proc.stderr
+    assert 'ended after 10 of its 20 frames (truncated?)' in proc.stderr
+
+
+def test_a_folder_of_mixed_sizes_and_kinds(tmp_path):
+    frame = cv2.imread(os.path.join(SAMPLES, '010_B.jpg'))
+    cv2.imwrite(str(tmp_path / 'a.png'), frame)
+    cv2.imwrite(str(tmp_path / 'b.png'), cv2.resize(frame, (320, 240)))
+    cv2.imwrite(str(tmp_path / 'c.png'), cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY))
+    cv2.imwrite(str(tmp_path / 'd.png'), cv2.resize(frame, (1280, 720)))
+    cv2.imwrite(str(tmp_path / 'e.png'), frame)
+    out = tmp_path / 'd.jsonl'
+    assert main(['--source', str(tmp_path), '--dry-run', '--decisions', str(out),
+                 '--quiet']) == 0
+    records = read_jsonl(out)
+    assert len(records) == 5 and 'error' not in str(records)
+    assert records[0]['theta'] == records[4]['theta']  # the same frame after other sizes
+
+
+@pytest.mark.parametrize('args', [['--watchdog', '0.7'], ['--watchdog', '0'],
+                                  ['--controller', 'nope'], ['--camera-retry', 'nan'],
+                                  ['--max-errors', '0']])
+def test_bad_safety_and_controller_values_are_errors(args):
+    proc = cli('--source', SAMPLES, '--dry-run', *args)
+    assert proc.returncode == 2
+    assert 'error:' in proc.stderr and 'Traceback' not in proc.stderr
