@@ -510,6 +510,14 @@ class LaneFollower:
         if self.stop_requested is None:
             self.stop_requested = reason
 
+    def hold_stopped(self, reason):
+        """Stop the robot now and answer every frame with a stop until resume()."""
+        self.hold = reason
+        self._publish(STOP)
+
+    def resume(self):
+        self.hold = None
+
     def _publish(self, command):
         with self._lock:
             if self._stopped:
@@ -803,6 +811,77 @@ def connect_ros():
     return rospy, Twist
 
 
+class MasterWatch:
+    """Watches the ROS master from a thread. While it is gone the robot is held stopped (the
+    connection to the base is peer to peer and still works); when a master answers again the
+    node's publishers are registered with it again, which rospy does not do by itself, and
+    driving resumes. Both are logged."""
+
+    def __init__(self, follower, rospy, period=1.0, timeout=1.0):
+        self.follower, self.rospy, self.period, self.timeout = follower, rospy, period, timeout
+        self.uri = os.environ.get('ROS_MASTER_URI', 'http://localhost:11311')
+        self.lost = False
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._watch, name='master-watch', daemon=True)
+
+    def start(self):
+        self._thread.start()
+        return self
+
+    def stop(self):
+        self._stop.set()
+
+    def _master(self):
+        import xmlrpc.client
+
+        timeout = self.timeout
+
+        class Transport(xmlrpc.client.Transport):
+            def make_connection(self, host):
+                conn = super().make_connection(host)
+                conn.timeout = timeout
+                return conn
+
+        return xmlrpc.client.ServerProxy(self.uri, transport=Transport())
+
+    def alive(self):
+        try:
+            code, _, _ = self._master().getPid(self.rospy.get_name())
+            return code == 1
+        except Exception:  # refused, reset, timed out, a bad reply: not there
+            return False
+
+    def _register_again(self):
+        from rospy.impl.registration import get_topic_manager
+
+        master, me, api = self._master(), self.rospy.get_name(), self.rospy.get_node_uri()
+        topics = get_topic_manager().get_publications()
+        for topic, data_type in topics:
+            master.registerPublisher(me, topic, data_type, api)
+        return [topic for topic, _ in topics]
+
+    def _watch(self):
+        log = self.rospy
+        while not self._stop.wait(self.period):
+            alive = self.alive()
+            if not alive and not self.lost:
+                self.lost = True
+                self.follower.hold_stopped('ROS master lost')
+                log.logwarn('ROS master at %s does not answer: robot held stopped until it is '
+                            'back', self.uri)
+            elif alive and self.lost:
+                try:
+                    topics = self._register_again()
+                except Exception as e:  # it went away again, or refused: try next time
+                    log.logwarn('ROS master at %s is back but registering failed (%s); '
+                                'still holding the robot stopped', self.uri, e)
+                    continue
+                self.lost = False
+                self.follower.resume()
+                log.logwarn('ROS master at %s is back: registered %s again; driving again',
+                            self.uri, ', '.join(topics))
+
+
 def install_signal_handlers(follower):
     def handler(signum, _frame):
         name = signal.Signals(signum).name
@@ -885,10 +964,13 @@ def main(argv=None):
                 'on %s%s', source.name, controller.name, params.algorithm, args.calibration,
                 params.rate, TOPIC,
                 ' (dry run)' if args.dry_run else '')
+    watch = None if args.dry_run else MasterWatch(follower, ros).start()
     start = time.monotonic()
     try:
         ended = follower.run()
     finally:
+        if watch is not None:
+            watch.stop()
         source.release()
         for sink in (decisions, video):
             if sink is not None:

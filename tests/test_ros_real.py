@@ -111,3 +111,124 @@ def test_roslaunch_starts_the_node_with_its_launch_parameters(roscore, twist_rec
             assert abs(r['theta']) > 0.5 and abs(r['angular_z']) == 0.3
         elif r['decision'] == 'straight':
             assert abs(r['theta']) < 0.5
+
+
+def test_rosnode_kill_stops_the_robot_before_exit(roscore, twist_recorder):
+    proc = subprocess.Popen([sys.executable, NODE, '--source', os.path.join(REPO, 'samples',
+                                                                            'track')],
+                            env=roscore['env'], cwd=REPO, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)
+    twist_recorder.wait_for(3, timeout=20)
+    kill = subprocess.run(['rosnode', 'kill', '/kobuki_lane'], env=roscore['env'],
+                          capture_output=True, text=True, timeout=30)
+    assert kill.returncode == 0, kill.stdout + kill.stderr
+    _, err = proc.communicate(timeout=20)
+    assert proc.returncode == 0, err
+    assert 'ended: ROS shutdown' in err
+    messages = twist_recorder.wait_for(10**6, timeout=1.0)
+    assert 3 <= len(messages) < 28
+    assert messages[-1][1:] == (0.0, 0.0)
+
+
+SUBSCRIBER = '''
+import sys, time, rospy
+from geometry_msgs.msg import Twist
+rospy.init_node('listener', anonymous=True, disable_signals=True)
+rospy.Subscriber('/mobile_base/commands/velocity', Twist,
+                 lambda m: print(time.time(), m.linear.x, m.angular.z, flush=True),
+                 queue_size=100)
+print('ready', flush=True)
+while True:
+    time.sleep(0.1)
+'''
+
+
+class Listener:
+    """A subscriber in its own process (this process's rospy belongs to the session master)."""
+
+    def __init__(self, env, log):
+        self.log = open(log, 'w+')
+        self.proc = subprocess.Popen([sys.executable, '-c', SUBSCRIBER], env=env, cwd=REPO,
+                                     stdout=self.log, stderr=subprocess.DEVNULL,
+                                     start_new_session=True)
+
+    def messages(self):
+        self.log.flush()
+        with open(self.log.name) as f:
+            rows = [line.split() for line in f if not line.startswith('ready')]
+        return [(float(t), float(x), float(z)) for t, x, z in rows]
+
+    def wait_for(self, count, timeout):
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline and len(self.messages()) < count:
+            time.sleep(0.1)
+        return self.messages()
+
+    def close(self):
+        os.killpg(self.proc.pid, signal.SIGKILL)
+        self.proc.wait()
+
+
+def start_master(port, env):
+    import rosgraph
+
+    proc = subprocess.Popen(['roscore', '-p', str(port)], env=env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.STDOUT, start_new_session=True)
+    deadline = time.monotonic() + 30
+    while not rosgraph.is_master_online(env['ROS_MASTER_URI']):
+        assert proc.poll() is None and time.monotonic() < deadline, 'roscore did not start'
+        time.sleep(0.2)
+    return proc
+
+
+def stop_master(proc):
+    os.killpg(proc.pid, signal.SIGTERM)
+    proc.wait(timeout=20)
+
+
+def test_master_restart_holds_the_robot_then_reconnects(roscore, tmp_path):
+    port = free_port()
+    env = dict(roscore['env'], ROS_MASTER_URI=f'http://localhost:{port}')
+    frames = tmp_path / 'frames'
+    frames.mkdir()
+    names = sorted(os.listdir(os.path.join(REPO, 'samples', 'track')))
+    for i in range(160):  # 40 s at 4 Hz, more than the test needs
+        os.symlink(os.path.join(REPO, 'samples', 'track', names[i % 8]),
+                   frames / f'{i:04d}.jpg')
+    decisions = tmp_path / 'd.jsonl'
+    master = start_master(port, env)
+    listeners, node = [], None
+    try:
+        node = subprocess.Popen([sys.executable, NODE, '--source', str(frames), '--decisions',
+                                 str(decisions), '--wait-for-base', '10'],
+                                env=env, cwd=REPO, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.PIPE, text=True)
+        listeners.append(Listener(env, tmp_path / 'before.log'))
+        assert len(listeners[0].wait_for(4, timeout=30)) >= 4
+        stop_master(master)
+        gone = time.time()
+        time.sleep(4)
+        during = [m for m in listeners[0].messages() if m[0] > gone + 1.5]
+        assert during and all(m[1:] == (0.0, 0.0) for m in during)  # held stopped
+        master = start_master(port, env)
+        back = time.time()
+        time.sleep(3)
+        listeners.append(Listener(env, tmp_path / 'after.log'))  # only finds a registered node
+        after = listeners[1].wait_for(4, timeout=20)
+        assert len(after) >= 4 and any(m[1] > 0 for m in after), after  # driving again
+        node.send_signal(signal.SIGINT)
+        _, err = node.communicate(timeout=20)
+        assert node.returncode == 130, err
+    finally:
+        for listener in listeners:
+            listener.close()
+        if node is not None and node.poll() is None:
+            node.kill()
+        stop_master(master)
+    assert 'does not answer: robot held stopped' in err
+    assert 'is back: registered' in err and '/mobile_base/commands/velocity again' in err, err
+    assert 'Traceback' not in err
+    records = read_jsonl(decisions)
+    held = [r for r in records if r.get('held') == 'ROS master lost']
+    assert held and all(r['linear_x'] == 0.0 for r in held)
+    assert any(r['t'] > back and 'held' not in r and r['linear_x'] > 0 for r in records)
