@@ -4,6 +4,7 @@
     run.mp4              a video file                cv2.VideoCapture(path)
     frames/%04d.png      an image-sequence pattern   cv2.VideoCapture(pattern)
     rtsp://..., http://  any URL VideoCapture takes  cv2.VideoCapture(url)    live
+    run.bag              a ROS 1 bag's image topic   bags.BagSource (--image-topic)
     samples/track/       a folder of images, read in name order
     picture.png          one image
 
@@ -185,9 +186,16 @@ def truncated(path):
         return marker not in f.read()
 
 
-def open_source(spec, warn=None):
+def open_source(spec, warn=None, image_topic=None):
     """Open what --source names; SourceError if it cannot be opened."""
     spec = str(spec)
+    if spec.lower().endswith('.bag') and os.path.isfile(spec):
+        from bags import BagError, BagSource
+
+        try:
+            return BagSource(spec, image_topic)
+        except BagError as e:
+            raise SourceError(str(e)) from None
     if spec.isdigit():
         return CaptureSource(spec, int(spec), live=True)
     if '://' in spec:

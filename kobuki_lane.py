@@ -483,7 +483,7 @@ class LaneFollower:
 
     def __init__(self, ros, twist_type, source, params, camera, controller=None,
                  decisions=None, video=None, show=False, progress=None, wait_for_base=0.0,
-                 safety=None):
+                 safety=None, bag=None, debug=None):
         self.ros, self.twist_type, self.source = ros, twist_type, source
         self.p, self.camera = params, camera
         self.controller = controller or LectureRule(params)
@@ -491,6 +491,9 @@ class LaneFollower:
         self.progress = progress or Progress(None, False)
         self.wait_for_base = wait_for_base
         self.safety = safety or Safety()
+        self.bag = bag  # bags.BagRecorder: every command sent, and frames if it wants them
+        # (publisher, message maker): annotated frames, built only while someone subscribes
+        self.debug, self.debug_message = debug or (None, None)
         self.counts = dict(left=0, right=0, straight=0, none=0)
         self.frames = 0
         self.errors = 0  # pipeline failures in a row
@@ -510,6 +513,12 @@ class LaneFollower:
         if self.stop_requested is None:
             self.stop_requested = reason
 
+    def _send(self, command):
+        """Publish (and record in the bag, if any); the caller holds the lock."""
+        self._pub.publish(make_twist(self.twist_type, command))
+        if self.bag is not None:
+            self.bag.twist(self.ros.get_time(), command.linear_x, command.angular_z)
+
     def hold_stopped(self, reason):
         """Stop the robot now and answer every frame with a stop until resume()."""
         self.hold = reason
@@ -522,7 +531,7 @@ class LaneFollower:
         with self._lock:
             if self._stopped:
                 return  # never move again once the stop has been sent
-            self._pub.publish(make_twist(self.twist_type, safe(command)))
+            self._send(safe(command))
             self._last_sent = self.ros.get_time()
 
     def _watchdog(self, _event):
@@ -534,7 +543,7 @@ class LaneFollower:
             if now - self._last_sent < self.safety.watchdog:
                 self._stalled = False
                 return
-            self._pub.publish(make_twist(self.twist_type, STOP))
+            self._send(STOP)
             self._last_sent = now
             self.watchdog_stops += 1
             first = not self._stalled
@@ -550,7 +559,7 @@ class LaneFollower:
                 return
             self._stopped = True
             try:
-                self._pub.publish(make_twist(self.twist_type, STOP))
+                self._send(STOP)
             except self.ros.ROSException as e:  # topic already closed by a ROS shutdown
                 self.ros.logwarn('could not publish the final stop: %s', e)
 
@@ -586,7 +595,7 @@ class LaneFollower:
                          command.linear_x, command.angular_z,
                          ' [late: stopped]' if late else f' [{held}: stopped]' if held else '')
         self._write(record)
-        if self.video is not None or self.show:
+        if self.video is not None or self.show or self.images_wanted():
             self._picture(annotate(detection, command, self.p))
         self.progress.update(self.frames)
         return record
@@ -608,9 +617,18 @@ class LaneFollower:
         self.counts['none'] += 1
         self.frames += 1
 
+    def images_wanted(self):
+        """Annotated frames go to the bag or the debug topic only when asked for there."""
+        return ((self.bag is not None and self.bag.images) or
+                (self.debug is not None and self.debug.get_num_connections() > 0))
+
     def _picture(self, image):
         if self.video is not None:
             self.video.write(image)
+        if self.bag is not None and self.bag.images:
+            self.bag.image(self.ros.get_time(), image)
+        if self.debug is not None and self.debug.get_num_connections() > 0:
+            self.debug.publish(self.debug_message(image))
         if self.show:
             cv2.imshow('kobuki_lane', image)
             if cv2.waitKey(1) & 0xFF == ord('q'):
@@ -728,6 +746,15 @@ def build_parser():
     io.add_argument('--decisions', metavar='FILE',
                     help='write one JSON object per frame (JSON Lines), flushed per frame')
     io.add_argument('--video', metavar='FILE', help='write annotated frames (.avi or .mp4)')
+    io.add_argument('--bag', metavar='FILE',
+                    help=f'record every command sent as geometry_msgs/Twist on {TOPIC} in a new '
+                         'ROS 1 bag (complete even after Ctrl-C)')
+    io.add_argument('--bag-images', action='store_true',
+                    help='also record the annotated frames in the bag, as '
+                         'sensor_msgs/CompressedImage on /kobuki_lane/debug_image/compressed')
+    io.add_argument('--image-topic', metavar='TOPIC',
+                    help='with --source run.bag: the sensor_msgs/Image or CompressedImage '
+                         'topic to play (needed when the bag has more than one)')
     io.add_argument('--show', action='store_true',
                     help='show annotated frames in a window (needs a display and an OpenCV '
                          'build with GUI); q quits')
@@ -882,6 +909,22 @@ class MasterWatch:
                             self.uri, ', '.join(topics))
 
 
+def debug_publisher(rospy):
+    """~debug_image/compressed: the annotated frames, for rqt_image_view; the node builds them
+    only while something subscribes."""
+    from sensor_msgs.msg import CompressedImage
+
+    def message(image):
+        msg = CompressedImage()
+        msg.header.stamp = rospy.Time.now()
+        msg.header.frame_id = 'camera'
+        msg.format = 'jpeg'
+        msg.data = cv2.imencode('.jpg', image, [cv2.IMWRITE_JPEG_QUALITY, 80])[1].tobytes()
+        return msg
+
+    return rospy.Publisher('~debug_image/compressed', CompressedImage, queue_size=1), message
+
+
 def install_signal_handlers(follower):
     def handler(signum, _frame):
         name = signal.Signals(signum).name
@@ -917,7 +960,10 @@ def main(argv=None):
     ours, private = split_ros_args(argv)
     parser = build_parser()
     args = parser.parse_args(ours)
-    for path, what in ((args.decisions, '--decisions'), (args.video, '--video')):
+    if args.bag_images and not args.bag:
+        fail('--bag-images needs --bag FILE')
+    for path, what in ((args.decisions, '--decisions'), (args.video, '--video'),
+                       (args.bag, '--bag')):
         if path:
             check_output(path, what)
     if args.show:
@@ -944,7 +990,7 @@ def main(argv=None):
     except (ValueError, TypeError) as e:
         parser.error(str(e))
     try:
-        source = open_source(args.source, warn=ros.logwarn)
+        source = open_source(args.source, warn=ros.logwarn, image_topic=args.image_topic)
     except SourceError as e:
         fail(str(e))
     if not source.live:
@@ -953,12 +999,21 @@ def main(argv=None):
     show_progress = args.progress == 'on' or (args.progress == 'auto' and sys.stderr.isatty())
     decisions = open(args.decisions, 'w', encoding='utf-8') if args.decisions else None
     video = VideoSink(args.video, params.rate) if args.video else None
+    bag = None
+    if args.bag:
+        from bags import BagError, BagRecorder
+
+        try:
+            bag = BagRecorder(args.bag, TOPIC, images=args.bag_images)
+        except BagError as e:
+            fail(str(e))
+    debug = None if args.dry_run else debug_publisher(ros)
     follower = LaneFollower(ros, twist_type, source, params, camera, controller=controller,
                             decisions=decisions,
                             video=video, show=args.show,
                             progress=Progress(source.total, show_progress),
                             wait_for_base=0.0 if args.dry_run else args.wait_for_base,
-                            safety=safety)
+                            safety=safety, bag=bag, debug=debug)
     install_signal_handlers(follower)
     ros.loginfo('kobuki_lane: source %s, %s controller, algorithm %s, calibration %s, %.1f Hz '
                 'on %s%s', source.name, controller.name, params.algorithm, args.calibration,
@@ -972,7 +1027,7 @@ def main(argv=None):
         if watch is not None:
             watch.stop()
         source.release()
-        for sink in (decisions, video):
+        for sink in (decisions, video, bag):
             if sink is not None:
                 sink.close()
         if not args.dry_run:

@@ -118,7 +118,7 @@ class TrackSimulator:
     total = None
 
     def __init__(self, spec, ros, seed=0, time_limit=None, keep_going=False, start_offset=0.0,
-                 start_yaw=0.0, limits=None):
+                 start_yaw=0.0, limits=None, t0=0.0):
         self.spec, self.ros = spec, ros
         track = spec.track
         # open tracks go on straight beyond the finish so the camera still sees tape there
@@ -126,20 +126,27 @@ class TrackSimulator:
                                                  track.segments + [{'straight': 3.5}])
         self.floor_map = FloorMap(shown, spec.gaps, spec.dashes)
         self.camera = FloorCamera(LECTURE_CAMERA, spec.mounting)
-        self.base = DiffDriveBase(track.pose_at(0.0, start_offset, start_yaw), limits)
         ros.listeners.append(lambda t, topic, msg: self.base.command(t, msg.linear.x,
                                                                     msg.angular.z))
         self.rng = np.random.default_rng(seed)
         self.seed = seed
-        self.time_limit = time_limit or (track.length / 0.04 + 30.0)
         self.keep_going = keep_going
+        self._start = (start_offset, start_yaw, limits, time_limit)
         self.frames = 0
+        self.restart(t0)
+
+    def restart(self, t0):
+        """Put the robot back at the start at time t0, for a new run on the same track."""
+        offset, yaw, limits, time_limit = self._start
+        track = self.spec.track
+        self.base = DiffDriveBase(track.pose_at(0.0, offset, yaw), limits, t0=t0)
+        self.time_limit = t0 + (time_limit or (track.length / 0.04 + 30.0))
         self.history = []  # (t, x, y, s, offset)
         self.departure_points = []
         self.ended = None
         self._idx = 0
         self._departed = False
-        self._best = (0.0, 0.0)  # (progress s, time reached)
+        self._best = (0.0, t0)  # (progress s, time reached)
 
     def where(self):
         """Arc length along the centre line and signed offset (+ left) of the robot."""

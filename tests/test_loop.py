@@ -254,3 +254,34 @@ def test_decision_records_have_the_documented_keys():
         assert key in record
     assert record['source'] == 'x.png' and record['decision'] == 'none'
     assert record['linear_x'] == 0.0 and record['lines'] == 0
+
+
+def test_debug_images_are_built_only_while_someone_subscribes(monkeypatch):
+    class Debug:
+        connections = 0
+        sent = []
+
+        def get_num_connections(self):
+            return self.connections
+
+        def publish(self, msg):
+            self.sent.append(msg)
+
+    import kobuki_lane
+
+    built = []
+    monkeypatch.setattr(kobuki_lane, 'annotate', lambda *a: built.append(1) or a[0].image)
+    debug = Debug()
+    ros = StandInRospy(SimClock(), quiet=True)
+    follower = LaneFollower(ros, Twist, ListSource(blank_frames(6)), LaneParams(), None,
+                            debug=(debug, lambda image: image.shape))
+    holder = iter([0, 0, 1, 1, 0, 0])
+    original = follower.step
+
+    def step(frame, label, read_at=None):
+        debug.connections = next(holder)
+        return original(frame, label, read_at)
+
+    follower.step = step
+    follower.run()
+    assert len(built) == 2 and debug.sent == [(480, 640, 3)] * 2

@@ -232,3 +232,26 @@ def test_master_restart_holds_the_robot_then_reconnects(roscore, tmp_path):
     held = [r for r in records if r.get('held') == 'ROS master lost']
     assert held and all(r['linear_x'] == 0.0 for r in held)
     assert any(r['t'] > back and 'held' not in r and r['linear_x'] > 0 for r in records)
+
+
+def test_debug_image_topic_carries_annotated_frames(roscore, few_frames):
+    import rospy
+    from sensor_msgs.msg import CompressedImage
+
+    got = []
+    sub = rospy.Subscriber('/kobuki_lane/debug_image/compressed', CompressedImage,
+                           got.append, queue_size=100)
+    try:
+        proc = run_node(roscore, ['--source', str(few_frames), '--wait-for-base', '0'])
+        assert proc.returncode == 0, proc.stderr
+        deadline = time.monotonic() + 5
+        while len(got) < 3 and time.monotonic() < deadline:
+            time.sleep(0.1)
+    finally:
+        sub.unregister()
+    assert len(got) >= 3  # the first frames may go before the subscription is connected
+    import cv2
+    import numpy as np
+
+    image = cv2.imdecode(np.frombuffer(got[-1].data, np.uint8), cv2.IMREAD_COLOR)
+    assert got[-1].format == 'jpeg' and image.shape == (480, 640, 3)

@@ -238,3 +238,27 @@ def test_simulate_rejects_bad_scene_flags(args, capsys):
         simulate.main(['--track', 'lecture', *args])
     assert e.value.code == 2
     assert 'error' in capsys.readouterr().err
+
+
+def test_soak_with_frequent_faults_never_moves_while_blind(monkeypatch):
+    import soak
+
+    # every fault far more often than in the benchmark, so a short run meets each of them
+    monkeypatch.setattr(soak, 'FAULTS', {name: (0.04, span)
+                                         for name, (_, span) in soak.FAULTS.items()})
+    result = soak.soak('oval', 'improved', frames=160, seed=3, progress=False)
+    assert all(count > 0 for count in result['faults'].values()), result['faults']
+    assert result['ended'] == 'end of input' and result['frames'] == 160
+    assert result['longest_gap_s'] <= 0.5 + 1e-9
+    assert result['moving_while_camera_out'] == 0
+    assert result['moving_after_lane_lost'] == 0
+    assert result['watchdog_stops'] > 0
+
+
+def test_soak_counts_commands_inside_fault_intervals():
+    import soak
+
+    commands = [(0.0, 0.1, 0.0), (1.0, 0.1, 0.0), (1.5, 0.0, 0.0), (2.0, 0.0, 0.3), (3.0, 0.1, 0)]
+    assert soak.moving(commands, [[0.5, 2.0]]) == 2
+    assert soak.moving(commands, [[0.5, 2.0]], grace=0.6) == 1
+    assert soak.moving(commands, [[2.5, 2.9]]) == 0

@@ -1,0 +1,168 @@
+"""ROS 1 bags both ways, checked against Debian's real rosbag (python3-rosbag, rosbag info)."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import cv2
+import numpy as np
+import pytest
+from conftest import REPO, SAMPLES
+
+from bags import BagSource
+from frames import SourceError, open_source
+from kobuki_lane import main
+
+NODE = os.path.join(REPO, 'kobuki_lane.py')
+TOPIC = '/mobile_base/commands/velocity'
+
+
+def samples(n=6):
+    names = sorted(os.listdir(SAMPLES))[:n]
+    return [cv2.imread(os.path.join(SAMPLES, name)) for name in names]
+
+
+def ros_image(frame, encoding):
+    """A sensor_msgs/Image made with ROS's own message class."""
+    from sensor_msgs.msg import Image
+
+    if encoding == 'rgb8':
+        frame = cv2.cvtColor(frame, cv2.COLOR_BGR2RGB)
+    elif encoding == 'mono8':
+        frame = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
+    msg = Image(height=frame.shape[0], width=frame.shape[1], encoding=encoding,
+                is_bigendian=0, step=frame.strides[0], data=frame.tobytes())
+    return msg
+
+
+def write_ros_bag(path, frames, encoding='bgr8', topic='/camera/rgb/image_raw'):
+    """A bag written by the real rosbag API, as a robot's recording would be."""
+    import rosbag
+    import rospy
+    from sensor_msgs.msg import CompressedImage
+    from std_msgs.msg import String
+
+    with rosbag.Bag(str(path), 'w') as bag:
+        for i, frame in enumerate(frames):
+            stamp = rospy.Time(1700000000 + i // 4, (i % 4) * 250_000_000)
+            if encoding == 'jpeg':
+                msg = CompressedImage(format='jpeg',
+                                      data=cv2.imencode('.jpg', frame)[1].tobytes())
+                bag.write(topic + '/compressed', msg, stamp)
+            else:
+                bag.write(topic, ros_image(frame, encoding), stamp)
+        bag.write('/odom_note', String('x'), stamp)
+
+
+@pytest.mark.parametrize('encoding', ['bgr8', 'rgb8', 'mono8', 'jpeg'])
+def test_a_bag_from_real_rosbag_plays_as_frames(tmp_path, encoding):
+    frames = samples()
+    path = tmp_path / 'run.bag'
+    write_ros_bag(path, frames, encoding)
+    source = open_source(str(path))  # one image topic: found without --image-topic
+    got = []
+    while True:
+        ok, frame, label = source.read()
+        if not ok:
+            break
+        got.append(frame)
+    source.release()
+    assert len(got) == len(frames)
+    for ours, theirs in zip(got, frames, strict=True):
+        if encoding == 'mono8':
+            assert np.array_equal(ours, cv2.cvtColor(theirs, cv2.COLOR_BGR2GRAY))
+        elif encoding == 'jpeg':
+            assert ours.shape == theirs.shape
+            assert np.abs(ours.astype(int) - theirs).mean() < 3
+        else:
+            assert np.array_equal(ours, theirs)
+
+
+def test_the_node_decides_on_a_bag_as_on_the_frames(tmp_path):
+    frames = samples(8)
+    path = tmp_path / 'run.bag'
+    write_ros_bag(path, frames)
+    folder = tmp_path / 'frames'
+    folder.mkdir()
+    for i, frame in enumerate(frames):
+        cv2.imwrite(str(folder / f'{i:02d}.png'), frame)
+    a, b = tmp_path / 'a.jsonl', tmp_path / 'b.jsonl'
+    assert main(['--source', str(path), '--image-topic', '/camera/rgb/image_raw', '--dry-run',
+                 '--quiet', '--decisions', str(a)]) == 0
+    assert main(['--source', str(folder), '--dry-run', '--quiet', '--decisions', str(b)]) == 0
+    keys = ('lines', 'theta', 'decision')
+    rows = [[{k: r[k] for k in keys} for r in map(json.loads, open(p))] for p in (a, b)]
+    assert rows[0] == rows[1] and len(rows[0]) == 8
+
+
+def test_missing_topic_and_bad_encoding_are_clear_errors(tmp_path):
+    path = tmp_path / 'run.bag'
+    write_ros_bag(path, samples(2))
+    with pytest.raises(SourceError, match=r"no sensor_msgs/Image .* on '/nope'; it has "
+                                          r'/camera/rgb/image_raw \(sensor_msgs/Image\), '
+                                          r'/odom_note \(std_msgs/String\)'):
+        open_source(str(path), image_topic='/nope')
+    odd = tmp_path / 'odd.bag'
+    import rosbag
+    from sensor_msgs.msg import Image
+
+    with rosbag.Bag(str(odd), 'w') as bag:
+        bag.write('/cam', Image(height=2, width=2, encoding='bayer_rggb8', step=2,
+                                data=bytes(4)))
+    proc = subprocess.run([sys.executable, NODE, '--source', str(odd), '--dry-run'],
+                          cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and 'Traceback' not in proc.stderr
+    assert "'bayer_rggb8'; supported: bgr8" in proc.stderr
+
+
+def read_twists(path):
+    import rosbag
+
+    with rosbag.Bag(str(path)) as bag:
+        return [(t.to_sec(), m.linear.x, m.angular.z)
+                for _, m, t in bag.read_messages(topics=[TOPIC])]
+
+
+def test_the_bag_we_write_opens_in_real_rosbag(tmp_path):
+    out, decisions = tmp_path / 'out.bag', tmp_path / 'd.jsonl'
+    assert main(['--source', SAMPLES, '--dry-run', '--quiet', '--bag', str(out), '--bag-images',
+                 '--decisions', str(decisions)]) == 0
+    info = subprocess.run(['rosbag', 'info', str(out)], capture_output=True, text=True,
+                          timeout=60)
+    assert info.returncode == 0, info.stderr
+    assert f'{TOPIC}        29 msgs    : geometry_msgs/Twist' in info.stdout
+    assert '/kobuki_lane/debug_image/compressed   28 msgs    : sensor_msgs/CompressedImage' \
+        in info.stdout
+    records = [json.loads(line) for line in open(decisions)]
+    twists = read_twists(out)
+    assert [(x, z) for _, x, z in twists] == [(r['linear_x'], r['angular_z'])
+                                               for r in records] + [(0.0, 0.0)]
+    assert np.allclose(np.diff([t for t, _, _ in twists[:28]]), 0.25)  # when each was sent
+    played = BagSource(str(out), '/kobuki_lane/debug_image/compressed')  # and we read it back
+    assert played.total == 28 and played.read()[1].shape == (480, 640, 3)
+    played.release()
+
+
+def test_an_existing_bag_is_not_overwritten(tmp_path):
+    out = tmp_path / 'out.bag'
+    out.write_bytes(b'precious')
+    proc = subprocess.run([sys.executable, NODE, '--source', SAMPLES, '--dry-run', '--bag',
+                           str(out)], cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and 'exists already' in proc.stderr
+    assert out.read_bytes() == b'precious'
+
+
+def test_ctrl_c_leaves_a_bag_that_opens(tmp_path):
+    out = tmp_path / 'out.bag'
+    proc = subprocess.Popen([sys.executable, NODE, '--source', SAMPLES, '--dry-run', '--realtime',
+                             '--bag', str(out), '--quiet'], cwd=REPO, stderr=subprocess.PIPE,
+                            text=True)
+    time.sleep(2.5)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130, err
+    twists = read_twists(out)
+    assert 3 <= len(twists) < 29 and twists[-1][1:] == (0.0, 0.0)
