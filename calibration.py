@@ -9,6 +9,13 @@ live here as LECTURE_CAMERA. Any other camera is loaded from the YAML layout tha
 usage:
     python calibration.py --show lecture          print a calibration and what it implies
     python calibration.py --show camera.yaml
+    python calibration.py --images 'calib/*.png' --pattern 9x6 --square 0.025 -o camera.yaml
+                                                  calibrate from chessboard pictures
+
+--pattern is the chessboard's inner corners (columns x rows), --square the side of one square
+in metres. The tool finds the corners (sub-pixel), calibrates (plumb_bob), prints the RMS
+reprojection error and the pictures it could not use, and writes the camera_info YAML layout
+ROS's camera_calibration writes, which kobuki_lane.py --calibration camera.yaml loads.
 
 In code:
     camera = load_calibration('lecture')       # or 'none', or a path to a YAML file
@@ -157,14 +164,129 @@ def describe(camera):
             f"distortion {np.array2string(camera.distortion, precision=4)}")
 
 
+def find_corners(gray, pattern):
+    """The chessboard's inner corners to a tenth of a pixel, or None if it is not all there."""
+    found, corners = cv2.findChessboardCorners(
+        gray, pattern, flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
+    if not found:
+        return None
+    criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 0.01)
+    return cv2.cornerSubPix(gray, corners, (5, 5), (-1, -1), criteria)
+
+
+@dataclass
+class CalibrationResult:
+    camera: Camera
+    rms: float  # [px] reprojection error
+    used: list
+    unusable: list  # (path, why)
+
+
+def calibrate(paths, pattern, square, name='camera'):
+    """Calibrate from chessboard pictures; CalibrationError if fewer than 3 can be used."""
+    board = np.zeros((pattern[0] * pattern[1], 3), np.float32)
+    board[:, :2] = np.indices(pattern).T.reshape(-1, 2) * square
+    object_points, image_points, used, unusable, size = [], [], [], [], None
+    for path in paths:
+        gray = cv2.imread(path, cv2.IMREAD_GRAYSCALE)
+        if gray is None:
+            unusable.append((path, 'not a readable image'))
+            continue
+        if size is not None and gray.shape[::-1] != size:
+            unusable.append((path, f'{gray.shape[1]}x{gray.shape[0]}, not {size[0]}x{size[1]}'))
+            continue
+        corners = find_corners(gray, pattern)
+        if corners is None:
+            unusable.append((path, f'no {pattern[0]}x{pattern[1]} chessboard found'))
+            continue
+        size = gray.shape[::-1]
+        object_points.append(board)
+        image_points.append(corners)
+        used.append(path)
+    if len(used) < 3:
+        raise CalibrationError(f'only {len(used)} of {len(paths)} pictures show the whole '
+                               f'{pattern[0]}x{pattern[1]} chessboard; at least 3 are needed '
+                               '(10 to 20 at different angles and distances is better)')
+    rms, k, dist, _, _ = cv2.calibrateCamera(object_points, image_points, size, None, None)
+    return CalibrationResult(Camera(name, k, dist.ravel()[:5], size), float(rms), used, unusable)
+
+
+def camera_info_yaml(camera):
+    """The YAML camera_calibration writes (the rectification is the identity for a monocular
+    camera, and the projection is K with a zero fourth column)."""
+    def block(rows, cols, values):
+        data = ', '.join(f'{v:.10g}' for v in np.asarray(values, float).ravel())
+        return f'  rows: {rows}\n  cols: {cols}\n  data: [{data}]\n'
+
+    k = camera.matrix
+    projection = np.hstack([k, np.zeros((3, 1))])
+    return (f'image_width: {camera.image_size[0]}\nimage_height: {camera.image_size[1]}\n'
+            f'camera_name: {camera.name}\ncamera_matrix:\n{block(3, 3, k)}'
+            f'distortion_model: plumb_bob\n'
+            f'distortion_coefficients:\n{block(1, len(camera.distortion), camera.distortion)}'
+            f'rectification_matrix:\n{block(3, 3, np.eye(3))}'
+            f'projection_matrix:\n{block(3, 4, projection)}')
+
+
+def pattern_size(text):
+    try:
+        cols, rows = (int(n) for n in text.lower().split('x'))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not COLSxROWS, e.g. 9x6") from None
+    if cols < 2 or rows < 2:
+        raise argparse.ArgumentTypeError('a chessboard has at least 2x2 inner corners')
+    return cols, rows
+
+
+def positive_float(text):
+    value = float(text)
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f'{text} is not a positive length')
+    return value
+
+
+def run_calibration(args):
+    import glob
+    import os
+
+    paths = sorted(glob.glob(args.images))
+    if not paths:
+        raise CalibrationError(f"no files match '{args.images}' (quote the pattern)")
+    folder = os.path.dirname(os.path.abspath(args.output))
+    if not os.path.isdir(folder) or not os.access(folder, os.W_OK):
+        raise CalibrationError(f"cannot write '{args.output}': folder '{folder}' is missing "
+                               'or read-only')
+    result = calibrate(paths, args.pattern, args.square, args.name)
+    for path, why in result.unusable:
+        print(f'not used: {path}: {why}', file=sys.stderr)
+    with open(args.output, 'w', encoding='utf-8') as f:
+        f.write(camera_info_yaml(result.camera))
+    print(f'{len(result.used)} of {len(paths)} pictures used; RMS reprojection error '
+          f'{result.rms:.3f} px')
+    print(describe(result.camera))
+    print(f'wrote {args.output}: use it with kobuki_lane.py --calibration {args.output}')
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('--show', metavar='CALIBRATION', default='lecture',
+    parser.add_argument('--show', metavar='CALIBRATION', default=None,
                         help="'lecture', 'none' or a camera_info YAML path (default: lecture)")
+    parser.add_argument('--images', metavar='GLOB',
+                        help="chessboard pictures to calibrate from, e.g. 'calib/*.png'")
+    parser.add_argument('--pattern', type=pattern_size, default=(9, 6),
+                        help='inner corners, columns x rows (default: 9x6)')
+    parser.add_argument('--square', type=positive_float, default=0.025,
+                        help='side of one square [m] (default: 0.025)')
+    parser.add_argument('-o', '--output', default='camera.yaml',
+                        help='camera_info YAML to write (default: camera.yaml)')
+    parser.add_argument('--name', default='camera', help="camera_name in the YAML")
     args = parser.parse_args(argv)
     try:
-        print(describe(load_calibration(args.show)))
+        if args.images:
+            run_calibration(args)
+        else:
+            print(describe(load_calibration(args.show or 'lecture')))
     except CalibrationError as e:
         print(f'calibration.py: error: {e}', file=sys.stderr)
         return 2

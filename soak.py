@@ -64,6 +64,7 @@ class FaultySimulator:
         self.outages, self.covered = [], []  # [start, end] in simulated seconds
         self.injected = dict.fromkeys(FAULTS, 0)
         self.laps = self.departures = self.frames = 0
+        self.lap_ends = []  # (time, why)
         self.rss = {}
         self.sim = None
         self._new_lap()
@@ -104,9 +105,11 @@ class FaultySimulator:
             self.ros.clock.sleep(delay)
         ok, frame, _ = self.sim.read()
         if not ok:  # lap completed (or departed): the next lap starts here
+            self.lap_ends.append((round(now, 2), self.sim.ended))
             self._new_lap()
             ok, frame, _ = self.sim.read()
             if not ok:
+                self.lap_ends.append((round(now, 2), 'restart failed: ' + self.sim.ended))
                 return False, None, self.frames
         length = self._starts('covered camera')
         if length:
@@ -175,6 +178,8 @@ def soak(track='oval', controller='improved', frames=10000, seed=0, progress=Tru
         simulated_s=round(ros.get_time(), 1), commands=len(source.commands),
         longest_gap_s=round(float(np.diff(times).max()), 3),
         faults=source.injected, laps_completed=source.laps, departures=source.departures,
+        lap_ends={why: sum(1 for _, w in source.lap_ends if w == why)
+                  for why in sorted({w for _, w in source.lap_ends})},
         watchdog_stops=follower.watchdog_stops,
         moving_while_camera_out=moving(source.commands, source.outages),
         moving_after_lane_lost=moving(source.commands, source.covered,

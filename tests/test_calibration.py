@@ -1,5 +1,6 @@
 """calibration.py: the lecture's camera, ROS camera_info YAML files, and their errors."""
 
+import cv2
 import numpy as np
 import pytest
 from conftest import SAMPLES
@@ -91,3 +92,90 @@ def test_show_prints_the_cameras_field_of_view(capsys):
     assert main(['--show', 'lecture']) == 0
     out = capsys.readouterr().out
     assert 'fx=893.46' in out and 'field of view 39.4' in out
+
+
+# ---------------------------------------------------------------- the chessboard tool
+
+TRUE_K = np.array([[600.0, 0.0, 322.0], [0.0, 610.0, 238.0], [0.0, 0.0, 1.0]])
+TRUE_DIST = np.array([-0.15, 0.04, 0.001, -0.0015, 0.0])
+PATTERN, SQUARE = (9, 6), 0.025  # inner corners, metres
+
+
+def board_texture(px=40):
+    """The printed board: (cols+1) x (rows+1) squares of px pixels, with a white margin."""
+    cols, rows = PATTERN[0] + 1, PATTERN[1] + 1
+    squares = (np.indices((rows, cols)).sum(axis=0) % 2 == 0).astype(np.uint8) * 255
+    board = np.kron(255 - squares, np.ones((px, px), np.uint8))
+    return cv2.copyMakeBorder(board, px, px, px, px, cv2.BORDER_CONSTANT, value=255), px
+
+
+def render_view(rvec, tvec, size=(640, 480)):
+    """The board seen through TRUE_K and TRUE_DIST: each pixel's undistorted ray meets the
+    board's plane (z = 0 in board coordinates, origin at the first inner corner)."""
+    texture, px = board_texture()
+    w, h = size
+    uv = np.stack(np.meshgrid(np.arange(w), np.arange(h)), axis=-1).reshape(-1, 1, 2)
+    xy = cv2.undistortPointsIter(uv.astype(np.float64), TRUE_K, TRUE_DIST, None, None,
+                                 (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-9))
+    r = cv2.Rodrigues(np.asarray(rvec, float))[0]
+    plane = np.linalg.inv(np.column_stack([r[:, 0], r[:, 1], tvec]))
+    pts = np.concatenate([xy.reshape(-1, 2), np.ones((w * h, 1))], axis=1) @ plane.T
+    board_xy = pts[:, :2] / pts[:, 2:3]
+    # board metres -> texture pixels: the first inner corner is 2 squares in from the edge
+    tex = board_xy / SQUARE * px + 2 * px - 0.5
+    mx = tex[:, 0].reshape(h, w).astype(np.float32)
+    my = tex[:, 1].reshape(h, w).astype(np.float32)
+    view = cv2.remap(texture, mx, my, cv2.INTER_AREA, borderMode=cv2.BORDER_CONSTANT,
+                     borderValue=128)
+    return cv2.GaussianBlur(view, (3, 3), 0)
+
+
+@pytest.fixture(scope='module')
+def chessboards(tmp_path_factory):
+    folder = tmp_path_factory.mktemp('calib')
+    rng = np.random.default_rng(7)
+    centre = np.array([(PATTERN[0] - 1) * SQUARE / 2, (PATTERN[1] - 1) * SQUARE / 2, 0.0])
+    for i in range(14):
+        rvec = np.radians(rng.uniform([-35, -35, -20], [35, 35, 20]))
+        r = cv2.Rodrigues(rvec)[0]
+        distance = rng.uniform(0.35, 0.6)
+        shift = rng.uniform([-0.06, -0.04], [0.06, 0.04])
+        tvec = np.array([shift[0], shift[1], distance]) - r @ centre
+        cv2.imwrite(str(folder / f'view_{i:02d}.png'), render_view(rvec, tvec))
+    cv2.imwrite(str(folder / 'view_99_blank.png'), np.full((480, 640), 128, np.uint8))
+    return folder
+
+
+def test_the_tool_recovers_the_intrinsics_within_1_percent(chessboards, tmp_path, capsys):
+    out = tmp_path / 'camera.yaml'
+    assert main(['--images', str(chessboards / '*.png'), '--pattern', '9x6', '--square',
+                 str(SQUARE), '-o', str(out), '--name', 'rendered']) == 0
+    printed = capsys.readouterr()
+    assert 'not used:' in printed.err and 'view_99_blank.png' in printed.err
+    rms = float(printed.out.split('RMS reprojection error ')[1].split()[0])
+    assert rms < 0.3
+    camera = load_calibration(str(out))  # the YAML the node loads
+    k = camera.matrix
+    for got, want in ((k[0, 0], 600.0), (k[1, 1], 610.0), (k[0, 2], 322.0), (k[1, 2], 238.0)):
+        assert abs(got - want) / want < 0.01, (got, want)
+    assert camera.image_size == (640, 480) and camera.name == 'rendered'
+    import yaml
+
+    doc = yaml.safe_load(out.read_text())
+    for field in ('image_width', 'image_height', 'camera_name', 'camera_matrix',
+                  'distortion_model', 'distortion_coefficients', 'rectification_matrix',
+                  'projection_matrix'):
+        assert field in doc
+    assert doc['projection_matrix']['rows'] == 3 and doc['projection_matrix']['cols'] == 4
+    assert node_main(['--source', SAMPLES, '--dry-run', '--quiet', '--calibration',
+                      str(out)]) == 0
+
+
+def test_the_tool_says_when_it_cannot_calibrate(tmp_path, capsys):
+    cv2.imwrite(str(tmp_path / 'a.png'), np.full((48, 64), 100, np.uint8))
+    assert main(['--images', str(tmp_path / '*.png'), '-o', str(tmp_path / 'c.yaml')]) == 2
+    assert 'only 0 of 1 pictures show the whole 9x6 chessboard' in capsys.readouterr().err
+    assert main(['--images', str(tmp_path / 'none*.jpg')]) == 2
+    assert 'no files match' in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(['--images', 'x', '--pattern', '9by6'])
