@@ -307,8 +307,9 @@ class Pipeline:
         slopes = slope_sum(lines, p.slope_min)
         mark('slopes')
         if keep_stages:
+            roi_mask = lay.mask if lay.mask is not None else np.full_like(edged, 255)
             stages = dict(raw=raw, undistorted=image, gray=gray, blurred=blurred, edges=edged,
-                          masked=masked)
+                          roi=roi_mask, masked=masked)
             return Detection(lines, slopes, image, stages, cluttered=cluttered)
         if whole:
             return Detection(lines, slopes, image, cluttered=cluttered)
@@ -343,8 +344,8 @@ class LectureRule:
         self.p = p
         self.pipeline = Pipeline(p)
 
-    def perceive(self, frame, camera):
-        return self.pipeline(frame, camera)
+    def perceive(self, frame, camera, keep_stages=False):
+        return self.pipeline(frame, camera, keep_stages)
 
     def extra(self):
         return {}
@@ -362,6 +363,48 @@ class LectureRule:
             return Command('straight', p.straight_linear, 0.0)
         # fixed: |theta| == threshold matched no branch in the lecture; stop instead
         return STOP
+
+
+STAGE_TITLES = (('raw', 'raw frame'), ('undistorted', '1 calibration_camera: undistorted'),
+                ('gray', '2 cvtColor: gray'), ('blurred', '3 GaussianBlur 5x5'),
+                ('edges', '4 Canny 85, 85'), ('roi', '5 region_of_interest: the triangle'),
+                ('masked', '6 edges inside the triangle'))
+
+
+def stage_pictures(detection, command, p):
+    """(title, BGR image) for every stage of a detection made with keep_stages=True, ending
+    with the Hough segments, theta, value and the decision."""
+    pictures = [(title, as_bgr(detection.stages[key])) for key, title in STAGE_TITLES]
+    pictures.append(('7 HoughLinesP, theta, decision', annotate(detection, command, p)))
+    return pictures
+
+
+def contact_sheet(pictures, width=320, columns=4):
+    """The pictures side by side, each scaled to `width` with its title above it."""
+    tiles = []
+    for title, image in pictures:
+        h, w = image.shape[:2]
+        tile = cv2.resize(image, (width, max(1, round(h * width / w))),
+                          interpolation=cv2.INTER_AREA)
+        band = np.zeros((22, width, 3), np.uint8)
+        cv2.putText(band, title, (4, 15), cv2.FONT_HERSHEY_SIMPLEX, 0.42, (255, 255, 255), 1,
+                    cv2.LINE_AA)
+        tiles.append(np.vstack([band, tile]))
+    height = max(t.shape[0] for t in tiles)
+    tiles = [cv2.copyMakeBorder(t, 0, height - t.shape[0], 0, 0, cv2.BORDER_CONSTANT)
+             for t in tiles]
+    tiles += [np.zeros_like(tiles[0])] * (-len(tiles) % columns)
+    rows = [np.hstack(tiles[i:i + columns]) for i in range(0, len(tiles), columns)]
+    return np.vstack(rows)
+
+
+def write_stages(folder, index, detection, command, p):
+    """NNNN_K_stage.png for each stage of frame NNNN, and NNNN_sheet.png with all of them."""
+    pictures = stage_pictures(detection, command, p)
+    keys = [key for key, _ in STAGE_TITLES] + ['hough']
+    for k, ((_, image), key) in enumerate(zip(pictures, keys, strict=True)):
+        cv2.imwrite(os.path.join(folder, f'{index:04d}_{k}_{key}.png'), image)
+    cv2.imwrite(os.path.join(folder, f'{index:04d}_sheet.png'), contact_sheet(pictures))
 
 
 def annotate(detection, command, p):
@@ -483,7 +526,7 @@ class LaneFollower:
 
     def __init__(self, ros, twist_type, source, params, camera, controller=None,
                  decisions=None, video=None, show=False, progress=None, wait_for_base=0.0,
-                 safety=None, bag=None, debug=None):
+                 safety=None, bag=None, debug=None, stages=None):
         self.ros, self.twist_type, self.source = ros, twist_type, source
         self.p, self.camera = params, camera
         self.controller = controller or LectureRule(params)
@@ -491,6 +534,7 @@ class LaneFollower:
         self.progress = progress or Progress(None, False)
         self.wait_for_base = wait_for_base
         self.safety = safety or Safety()
+        self.stages = stages  # a folder: every stage of every frame as pictures
         self.bag = bag  # bags.BagRecorder: every command sent, and frames if it wants them
         # (publisher, message maker): annotated frames, built only while someone subscribes
         self.debug, self.debug_message = debug or (None, None)
@@ -569,7 +613,10 @@ class LaneFollower:
         read_at: ros time the frame arrived; a result ready more than watchdog seconds later
         is stale, and the robot is stopped instead."""
         read_at = self.ros.get_time() if read_at is None else read_at
-        detection = self.controller.perceive(frame, self.camera)
+        if self.stages:
+            detection = self.controller.perceive(frame, self.camera, keep_stages=True)
+        else:
+            detection = self.controller.perceive(frame, self.camera)
         command = self.controller(detection)
         late = self.ros.get_time() - read_at > self.safety.watchdog
         held = self.hold
@@ -595,6 +642,8 @@ class LaneFollower:
                          command.linear_x, command.angular_z,
                          ' [late: stopped]' if late else f' [{held}: stopped]' if held else '')
         self._write(record)
+        if self.stages:
+            write_stages(self.stages, record['frame'], detection, command, self.p)
         if self.video is not None or self.show or self.images_wanted():
             self._picture(annotate(detection, command, self.p))
         self.progress.update(self.frames)
@@ -746,6 +795,10 @@ def build_parser():
     io.add_argument('--decisions', metavar='FILE',
                     help='write one JSON object per frame (JSON Lines), flushed per frame')
     io.add_argument('--video', metavar='FILE', help='write annotated frames (.avi or .mp4)')
+    io.add_argument('--stages', metavar='DIR',
+                    help='write every stage of every frame as pictures (raw, undistorted, gray, '
+                         'blurred, Canny edges, ROI mask, masked edges, Hough segments with '
+                         'theta and the decision) and one contact sheet per frame')
     io.add_argument('--bag', metavar='FILE',
                     help=f'record every command sent as geometry_msgs/Twist on {TOPIC} in a new '
                          'ROS 1 bag (complete even after Ctrl-C)')
@@ -960,6 +1013,10 @@ def main(argv=None):
     ours, private = split_ros_args(argv)
     parser = build_parser()
     args = parser.parse_args(ours)
+    if args.stages and not os.path.isdir(args.stages):
+        fail(f"--stages '{args.stages}': no such folder (make it first)")
+    if args.stages and not os.access(args.stages, os.W_OK):
+        fail(f"--stages '{args.stages}': folder is not writable")
     if args.bag_images and not args.bag:
         fail('--bag-images needs --bag FILE')
     for path, what in ((args.decisions, '--decisions'), (args.video, '--video'),
@@ -1013,7 +1070,7 @@ def main(argv=None):
                             video=video, show=args.show,
                             progress=Progress(source.total, show_progress),
                             wait_for_base=0.0 if args.dry_run else args.wait_for_base,
-                            safety=safety, bag=bag, debug=debug)
+                            safety=safety, bag=bag, debug=debug, stages=args.stages)
     install_signal_handlers(follower)
     ros.loginfo('kobuki_lane: source %s, %s controller, algorithm %s, calibration %s, %.1f Hz '
                 'on %s%s', source.name, controller.name, params.algorithm, args.calibration,

@@ -249,7 +249,7 @@ class ImprovedController:
         self._roi = {}  # mask per (camera, width, height)
         self.pipeline = Pipeline(self.detect_params, max_edge_fraction=self.p.max_edge_fraction)
 
-    def perceive(self, frame, camera):
+    def perceive(self, frame, camera, keep_stages=False):
         h, w = frame.shape[:2]
         # with no calibration the pixels are taken as the lecture camera's, scaled to the frame
         geometry = camera or LECTURE_CAMERA
@@ -257,7 +257,7 @@ class ImprovedController:
         key = (id(camera), w, h)
         if key not in self._roi:
             self._roi[key] = floor_roi(w, h, self.p, camera)
-        return self.pipeline(frame, camera, roi=self._roi[key])
+        return self.pipeline(frame, camera, keep_stages, roi=self._roi[key])
 
     def __call__(self, detection):
         p = self.p

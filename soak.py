@@ -96,7 +96,9 @@ class FaultySimulator:
             return False, None, None
         if self.outages and now < self.outages[-1][1]:
             return False, None, self.frames
-        length = self._starts('camera outage')
+        # outages are spaced out: two back to back are one long loss, which ends the run
+        spaced = not self.outages or now > self.outages[-1][1] + 10.0
+        length = spaced and self._starts('camera outage')
         if length:
             self.outages.append([now, now + length])
             return False, None, self.frames
