@@ -287,3 +287,22 @@ def test_bad_safety_and_controller_values_are_errors(args):
     proc = cli('--source', SAMPLES, '--dry-run', *args)
     assert proc.returncode == 2
     assert 'error:' in proc.stderr and 'Traceback' not in proc.stderr
+
+
+def test_stages_writes_every_stage_and_a_sheet(tmp_path):
+    frames = tmp_path / 'frames'
+    frames.mkdir()
+    for name in sorted(os.listdir(SAMPLES))[:2]:
+        shutil.copy(os.path.join(SAMPLES, name), frames / name)
+    out = tmp_path / 'stages'
+    out.mkdir()
+    assert main(['--source', str(frames), '--dry-run', '--quiet', '--stages', str(out)]) == 0
+    names = sorted(os.listdir(out))
+    assert len(names) == 2 * 9 and '0001_sheet.png' in names
+    edges = cv2.imread(str(out / '0000_4_edges.png'), cv2.IMREAD_GRAYSCALE)
+    masked = cv2.imread(str(out / '0000_6_masked.png'), cv2.IMREAD_GRAYSCALE)
+    assert edges.shape == (480, 640) and 0 < masked.sum() < edges.sum()
+    sheet = cv2.imread(str(out / '0000_sheet.png'))
+    assert sheet.shape[1] == 4 * 320
+    proc = cli('--source', str(frames), '--dry-run', '--stages', str(tmp_path / 'missing'))
+    assert proc.returncode == 2 and 'no such folder' in proc.stderr
