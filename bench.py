@@ -214,19 +214,23 @@ def cluttered_frame(seed=0, size=(480, 640), lines=300, texture=True):
 # ---------------------------------------------------------------- timing
 
 class StageClock:
-    """mark(stage) records the time since the previous mark under that stage's name."""
+    """mark(stage) adds the time since the previous mark to that stage's time for the frame
+    (a stage may be marked more than once per frame, once per piece); 'slopes' ends a frame."""
 
     def __init__(self):
         self.times = {s: [] for s in STAGES + ('total',)}
+        self._frame = {}
         self._start = self._last = 0.0
 
     def mark(self, stage):
         now = time.perf_counter()
         if stage == 'start':
-            self._start = now
+            self._start, self._frame = now, dict.fromkeys(STAGES, 0.0)
         else:
-            self.times[stage].append(now - self._last)
+            self._frame[stage] += now - self._last
             if stage == 'slopes':
+                for name, seconds in self._frame.items():
+                    self.times[name].append(seconds)
                 self.times['total'].append(now - self._start)
         self._last = now
 
