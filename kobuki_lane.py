@@ -13,14 +13,21 @@ usage:
     python kobuki_lane.py                              the robot: camera 0, beside
                                                        roslaunch kobuki_node minimal.launch
     python kobuki_lane.py --source samples/track --dry-run --decisions d.jsonl --video d.avi
+    python kobuki_lane.py --source run.bag --image-topic /camera/rgb/image_raw --dry-run \
+        --bag commands.bag --stages stages/
     roslaunch kobuki_lane kobuki_lane.launch           the same node with launch parameters
 
 default values: the lecture's numbers (--help lists each with its unit). Each setting can come
 from a flag, a private ROS parameter (_threshold:=8 or <param> in a launch file), or the
 default, in that order of precedence.
 
-exit status: 0 input ended or the node was shut down, 1 camera lost, 2 bad arguments, an
-unopenable source or no ROS master, 130 Ctrl-C, 143 SIGTERM.
+safety: a watchdog publishes a stop whenever --watchdog seconds pass without a command; a lost
+camera is stopped for at once and reopened for --camera-retry seconds; a frame the pipeline
+fails on is answered with a stop; while the ROS master is gone the robot is held stopped.
+
+exit status: 0 input ended or the node was shut down, 1 camera lost or repeated pipeline
+errors, 2 bad arguments, an unopenable source, no frame at all, or no ROS master, 130 Ctrl-C,
+143 SIGTERM.
 """
 
 import argparse

@@ -30,6 +30,7 @@ import sys
 
 import numpy as np
 
+from bench import rss_mb
 from calibration import LECTURE_CAMERA
 from kobuki_lane import LaneFollower, LaneParams
 from rospy_standin import SimClock, StandInRospy, Twist
@@ -43,11 +44,6 @@ FAULTS = {  # chance per frame, and duration range [s]
     'slow frame': (0.003, (0.5, 1.0)),
     'pipeline error': (0.002, (0.0, 0.0)),
 }
-
-
-def rss_mb():
-    with open('/proc/self/status') as f:
-        return next(int(line.split()[1]) for line in f if line.startswith('VmRSS:')) / 1024
 
 
 class FaultySimulator:
