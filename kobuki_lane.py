@@ -200,9 +200,9 @@ class Layout:
             self.maps = undistortion_maps(camera, width, height)
         if roi is not None:
             self.mask = roi
-        elif p.algorithm == '1.1':
-            self.mask = np.zeros((height, width), np.uint8)
-            cv2.fillPoly(self.mask, region_of_interest_vertices(width, height), 255)
+        elif p.algorithm == '1.1':  # the lecture's function applied to an all-kept image
+            self.mask = region_of_interest(np.full((height, width), 255, np.uint8),
+                                           region_of_interest_vertices(width, height))
         else:
             self.mask = None
         rows = (np.flatnonzero(self.mask.any(axis=1)) if self.mask is not None
