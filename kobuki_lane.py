@@ -651,8 +651,11 @@ class LaneFollower:
         self._write(record)
         if self.stages:
             write_stages(self.stages, record['frame'], detection, command, self.p)
-        if self.video is not None or self.show or self.images_wanted():
-            self._picture(annotate(detection, command, self.p))
+        sinks = self._picture_sinks()
+        if sinks:  # the annotated picture is drawn only when something takes it
+            image = annotate(detection, command, self.p)
+            for sink in sinks:
+                sink(image)
         self.progress.update(self.frames)
         return record
 
@@ -673,22 +676,24 @@ class LaneFollower:
         self.counts['none'] += 1
         self.frames += 1
 
-    def images_wanted(self):
-        """Annotated frames go to the bag or the debug topic only when asked for there."""
-        return ((self.bag is not None and self.bag.images) or
-                (self.debug is not None and self.debug.get_num_connections() > 0))
-
-    def _picture(self, image):
+    def _picture_sinks(self):
+        """Where this frame's annotated picture goes: the video, the bag if it records frames,
+        the debug topic while someone subscribes, the window."""
+        sinks = []
         if self.video is not None:
-            self.video.write(image)
+            sinks.append(self.video.write)
         if self.bag is not None and self.bag.images:
-            self.bag.image(self.ros.get_time(), image)
+            sinks.append(lambda image: self.bag.image(self.ros.get_time(), image))
         if self.debug is not None and self.debug.get_num_connections() > 0:
-            self.debug.publish(self.debug_message(image))
+            sinks.append(lambda image: self.debug.publish(self.debug_message(image)))
         if self.show:
-            cv2.imshow('kobuki_lane', image)
-            if cv2.waitKey(1) & 0xFF == ord('q'):
-                self.request_stop('q pressed')
+            sinks.append(self._show)
+        return sinks
+
+    def _show(self, image):
+        cv2.imshow('kobuki_lane', image)
+        if cv2.waitKey(1) & 0xFF == ord('q'):
+            self.request_stop('q pressed')
 
     def _await_base(self):
         deadline = time.monotonic() + self.wait_for_base
