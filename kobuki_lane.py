@@ -39,6 +39,7 @@ import socket
 import sys
 import threading
 import time
+import xmlrpc.client
 from dataclasses import dataclass
 
 import cv2
@@ -903,6 +904,20 @@ def connect_ros():
     return rospy, Twist
 
 
+class TimeoutTransport(xmlrpc.client.Transport):
+    """XML-RPC over HTTP that gives up after `timeout` seconds (a host that vanished would
+    otherwise hang the caller), without touching the process-wide socket timeout rospy uses."""
+
+    def __init__(self, timeout):
+        super().__init__()
+        self.timeout = timeout
+
+    def make_connection(self, host):
+        conn = super().make_connection(host)
+        conn.timeout = self.timeout
+        return conn
+
+
 class MasterWatch:
     """Watches the ROS master from a thread. While it is gone the robot is held stopped (the
     connection to the base is peer to peer and still works); when a master answers again the
@@ -924,17 +939,7 @@ class MasterWatch:
         self._stop.set()
 
     def _master(self):
-        import xmlrpc.client
-
-        timeout = self.timeout
-
-        class Transport(xmlrpc.client.Transport):
-            def make_connection(self, host):
-                conn = super().make_connection(host)
-                conn.timeout = timeout
-                return conn
-
-        return xmlrpc.client.ServerProxy(self.uri, transport=Transport())
+        return xmlrpc.client.ServerProxy(self.uri, transport=TimeoutTransport(self.timeout))
 
     def alive(self):
         try:
