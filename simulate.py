@@ -118,7 +118,7 @@ class TrackSimulator:
     total = None
 
     def __init__(self, spec, ros, seed=0, time_limit=None, keep_going=False, start_offset=0.0,
-                 start_yaw=0.0, limits=None, t0=0.0):
+                 start_yaw=0.0, limits=None):
         self.spec, self.ros = spec, ros
         track = spec.track
         # open tracks go on straight beyond the finish so the camera still sees tape there
@@ -133,7 +133,7 @@ class TrackSimulator:
         self.keep_going = keep_going
         self._start = (start_offset, start_yaw, limits, time_limit)
         self.frames = 0
-        self.restart(t0)
+        self.restart(0.0)
 
     def restart(self, t0):
         """Put the robot back at the start at time t0, for a new run on the same track."""
