@@ -1067,21 +1067,23 @@ def main(argv=None):
         source = open_source(args.source, warn=ros.logwarn, image_topic=args.image_topic)
     except SourceError as e:
         fail(str(e))
-    if not source.live:
-        source = Prefetch(source)  # decode the next frames on the second core
-
-    show_progress = args.progress == 'on' or (args.progress == 'auto' and sys.stderr.isatty())
-    decisions = open(args.decisions, 'w', encoding='utf-8') if args.decisions else None
-    video = VideoSink(args.video, params.rate) if args.video else None
     bag = None
-    if args.bag:
+    if args.bag:  # the one output that can still be refused: before any other is opened
         from bags import BagError, BagRecorder
 
         try:
             bag = BagRecorder(args.bag, TOPIC, images=args.bag_images)
         except BagError as e:
+            source.release()
             fail(str(e))
+
+    show_progress = args.progress == 'on' or (args.progress == 'auto' and sys.stderr.isatty())
+    decisions = open(args.decisions, 'w', encoding='utf-8') if args.decisions else None
+    video = VideoSink(args.video, params.rate) if args.video else None
     debug = None if args.dry_run else debug_publisher(ros)
+    # last, so that no early exit leaves its thread inside OpenCV (that aborts the process)
+    if not source.live:
+        source = Prefetch(source)  # decode the next frames on the second core
     follower = LaneFollower(ros, twist_type, source, params, camera, controller=controller,
                             decisions=decisions,
                             video=video, show=args.show,
