@@ -2,39 +2,20 @@
 
 import os
 import shutil
-import socket
-import subprocess
-import sys
 import threading
 import time
 
 import pytest
 
+from roslive import free_port, node_env, start_master, stop_master
+
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SAMPLES = os.path.join(REPO, 'samples', 'track')
-
-
-def free_port():
-    with socket.socket() as s:
-        s.bind(('127.0.0.1', 0))
-        return s.getsockname()[1]
-
-
-def node_env(master_uri, ros_home):
-    """Environment for a node process: our venv's python first on PATH, the repo as a package."""
-    env = dict(os.environ)
-    env.update(ROS_MASTER_URI=master_uri, ROS_HOME=ros_home, ROS_LOG_DIR=ros_home,
-               ROS_PACKAGE_PATH=REPO, PYTHONUNBUFFERED='1',
-               PATH=os.path.dirname(sys.executable) + os.pathsep + env.get('PATH', ''))
-    env.pop('ROS_IP', None)
-    env['ROS_HOSTNAME'] = 'localhost'
-    return env
 
 
 @pytest.fixture(scope='session')
 def roscore(tmp_path_factory):
     """A real ROS master for the whole session; this process is a real rospy node on it."""
-    import rosgraph
 
     if shutil.which('roscore') is None:
         pytest.fail("roscore is not installed: run 'bash setup.sh test' (Debian's ros-core)")
@@ -42,25 +23,17 @@ def roscore(tmp_path_factory):
     uri = f'http://localhost:{port}'
     home = str(tmp_path_factory.mktemp('ros_home'))
     env = node_env(uri, home)
-    proc = subprocess.Popen(['roscore', '-p', str(port)], env=env, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.STDOUT, start_new_session=True)
-    deadline = time.monotonic() + 30
-    while not rosgraph.is_master_online(uri):
-        if proc.poll() is not None or time.monotonic() > deadline:
-            proc.kill()
-            pytest.fail(f'roscore did not come up on port {port}')
-        time.sleep(0.2)
+    try:
+        proc = start_master(port, env)
+    except RuntimeError as e:
+        pytest.fail(str(e))
     os.environ.update(ROS_MASTER_URI=uri, ROS_HOSTNAME='localhost', ROS_HOME=home)
     import rospy
 
     rospy.init_node('kobuki_lane_test_listener', anonymous=True, disable_signals=True)
     yield dict(uri=uri, env=env, home=home)
     rospy.signal_shutdown('tests done')
-    os.killpg(proc.pid, 15)
-    try:
-        proc.wait(timeout=10)
-    except subprocess.TimeoutExpired:
-        os.killpg(proc.pid, 9)
+    stop_master(proc)
 
 
 class TwistRecorder:

@@ -10,7 +10,9 @@ import subprocess
 import sys
 import time
 
-from conftest import REPO, free_port
+from conftest import REPO
+
+from roslive import Listener, free_port, start_master, stop_master
 
 NODE = os.path.join(REPO, 'kobuki_lane.py')
 
@@ -128,62 +130,6 @@ def test_rosnode_kill_stops_the_robot_before_exit(roscore, twist_recorder):
     messages = twist_recorder.wait_for(10**6, timeout=1.0)
     assert 3 <= len(messages) < 28
     assert messages[-1][1:] == (0.0, 0.0)
-
-
-SUBSCRIBER = '''
-import sys, time, rospy
-from geometry_msgs.msg import Twist
-rospy.init_node('listener', anonymous=True, disable_signals=True)
-rospy.Subscriber('/mobile_base/commands/velocity', Twist,
-                 lambda m: print(time.time(), m.linear.x, m.angular.z, flush=True),
-                 queue_size=100)
-print('ready', flush=True)
-while True:
-    time.sleep(0.1)
-'''
-
-
-class Listener:
-    """A subscriber in its own process (this process's rospy belongs to the session master)."""
-
-    def __init__(self, env, log):
-        self.log = open(log, 'w+')
-        self.proc = subprocess.Popen([sys.executable, '-c', SUBSCRIBER], env=env, cwd=REPO,
-                                     stdout=self.log, stderr=subprocess.DEVNULL,
-                                     start_new_session=True)
-
-    def messages(self):
-        self.log.flush()
-        with open(self.log.name) as f:
-            rows = [line.split() for line in f if not line.startswith('ready')]
-        return [(float(t), float(x), float(z)) for t, x, z in rows]
-
-    def wait_for(self, count, timeout):
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline and len(self.messages()) < count:
-            time.sleep(0.1)
-        return self.messages()
-
-    def close(self):
-        os.killpg(self.proc.pid, signal.SIGKILL)
-        self.proc.wait()
-
-
-def start_master(port, env):
-    import rosgraph
-
-    proc = subprocess.Popen(['roscore', '-p', str(port)], env=env, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.STDOUT, start_new_session=True)
-    deadline = time.monotonic() + 30
-    while not rosgraph.is_master_online(env['ROS_MASTER_URI']):
-        assert proc.poll() is None and time.monotonic() < deadline, 'roscore did not start'
-        time.sleep(0.2)
-    return proc
-
-
-def stop_master(proc):
-    os.killpg(proc.pid, signal.SIGTERM)
-    proc.wait(timeout=20)
 
 
 def test_master_restart_holds_the_robot_then_reconnects(roscore, tmp_path):

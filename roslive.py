@@ -1,0 +1,114 @@
+"""Real ROS 1 helpers for the tests and the soak: a roscore that can be killed and restarted,
+and a Twist subscriber in a process of its own that logs what it receives.
+
+Both need Debian's ros-core and python3-rospy (`bash setup.sh test` installs them).
+"""
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+
+VELOCITY = '/mobile_base/commands/velocity'
+
+
+def free_port():
+    with socket.socket() as s:
+        s.bind(('127.0.0.1', 0))
+        return s.getsockname()[1]
+
+
+def node_env(master_uri, ros_home, base=None):
+    """Environment for a node process: this python's bin first on PATH, the repo as a package,
+    logs under ros_home, everything on localhost."""
+    repo = os.path.dirname(os.path.abspath(__file__))
+    env = dict(os.environ if base is None else base)
+    env.update(ROS_MASTER_URI=master_uri, ROS_HOME=ros_home, ROS_LOG_DIR=ros_home,
+               ROS_PACKAGE_PATH=repo, PYTHONUNBUFFERED='1',
+               PATH=os.path.dirname(sys.executable) + os.pathsep + env.get('PATH', ''))
+    env.pop('ROS_IP', None)
+    env['ROS_HOSTNAME'] = 'localhost'
+    return env
+
+
+def start_master(port, env, timeout=30.0):
+    """roscore on `port` in its own process group; returns once it answers."""
+    import rosgraph
+
+    proc = subprocess.Popen(['roscore', '-p', str(port)], env=env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.STDOUT, start_new_session=True)
+    uri = f'http://localhost:{port}'
+    deadline = time.monotonic() + timeout
+    while not rosgraph.is_master_online(uri):
+        if proc.poll() is not None or time.monotonic() > deadline:
+            stop_master(proc, signal.SIGKILL)
+            raise RuntimeError(f'roscore did not come up on port {port}')
+        time.sleep(0.1)
+    return proc
+
+
+def stop_master(proc, sig=signal.SIGTERM, timeout=20.0):
+    """Signal roscore and its children (rosmaster, rosout); SIGKILL is a crash."""
+    try:
+        os.killpg(proc.pid, sig)
+    except ProcessLookupError:
+        pass
+    try:
+        proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+
+
+SUBSCRIBER = f'''
+import sys, time, rospy
+from geometry_msgs.msg import Twist
+rospy.init_node('listener', anonymous=True, disable_signals=True)
+rospy.Subscriber('{VELOCITY}', Twist,
+                 lambda m: print(time.time(), m.linear.x, m.angular.z, flush=True),
+                 queue_size=100)
+print('ready', flush=True)
+while True:
+    time.sleep(0.1)
+'''
+
+
+class Listener:
+    """A subscriber to the velocity topic in its own process (a process's rospy belongs to one
+    master session); each line of `log` is `receive-time linear.x angular.z`."""
+
+    def __init__(self, env, log):
+        self.log = open(log, 'w+')
+        self.proc = subprocess.Popen([sys.executable, '-c', SUBSCRIBER], env=env,
+                                     stdout=self.log, stderr=subprocess.DEVNULL,
+                                     start_new_session=True)
+
+    def ready(self):
+        self.log.flush()
+        with open(self.log.name) as f:
+            return f.readline().startswith('ready')
+
+    def messages(self):
+        """[(wall time received, linear.x, angular.z)] so far."""
+        self.log.flush()
+        with open(self.log.name) as f:
+            # a line without its newline may still be being written
+            rows = [line.split() for line in f
+                    if line.endswith('\n') and not line.startswith('ready')]
+        return [(float(t), float(x), float(z)) for t, x, z in rows]
+
+    def wait_for(self, count, timeout):
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline and len(self.messages()) < count:
+            time.sleep(0.1)
+        return self.messages()
+
+    def close(self):
+        try:
+            os.killpg(self.proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        self.proc.wait()
+        self.log.close()
