@@ -549,6 +549,7 @@ class LaneFollower:
         self.counts = dict(left=0, right=0, straight=0, none=0)
         self.frames = 0
         self.errors = 0  # pipeline failures in a row
+        self.failed = 0  # frames the pipeline failed on, in all
         self.watchdog_stops = 0
         self.ended = None  # why the loop ended
         self.stop_requested = None
@@ -668,6 +669,7 @@ class LaneFollower:
     def _failed(self, label, error):
         """A frame the pipeline could not process: log it, stop the robot, go on."""
         self.errors += 1
+        self.failed += 1
         self._publish(STOP)
         self.ros.logerr('frame %d (%s): %s: %s; robot stopped (%d in a row)', self.frames, label,
                         type(error).__name__, error, self.errors)

@@ -10,6 +10,7 @@ import socket
 import subprocess
 import sys
 import time
+import xmlrpc.client
 
 VELOCITY = '/mobile_base/commands/velocity'
 
@@ -35,31 +36,61 @@ def node_env(master_uri, ros_home, base=None):
 
 def start_master(port, env, timeout=30.0):
     """roscore on `port` in its own process group; returns once it answers."""
-    import rosgraph
-
     proc = subprocess.Popen(['roscore', '-p', str(port)], env=env, stdout=subprocess.DEVNULL,
                             stderr=subprocess.STDOUT, start_new_session=True)
     uri = f'http://localhost:{port}'
     deadline = time.monotonic() + timeout
-    while not rosgraph.is_master_online(uri):
+    # answering is not enough: it must be this roscore's master, not one already there
+    while master_pid(uri) not in process_tree(proc.pid):
         if proc.poll() is not None or time.monotonic() > deadline:
             stop_master(proc, signal.SIGKILL)
-            raise RuntimeError(f'roscore did not come up on port {port}')
+            raise RuntimeError(f'roscore did not come up on port {port} (another master '
+                               'there?)')
         time.sleep(0.1)
     return proc
 
 
-def stop_master(proc, sig=signal.SIGTERM, timeout=20.0):
-    """Signal roscore and its children (rosmaster, rosout); SIGKILL is a crash."""
+def master_pid(uri):
+    """The process id of the master answering at uri, or None."""
     try:
-        os.killpg(proc.pid, sig)
-    except ProcessLookupError:
-        pass
+        code, _, pid = xmlrpc.client.ServerProxy(uri).getPid('/roslive')
+        return pid if code == 1 else None
+    except (OSError, xmlrpc.client.Error):
+        return None
+
+
+def process_tree(pid):
+    """pid and all its descendants (Linux /proc), parents first."""
+    children = {}
+    for entry in os.listdir('/proc'):
+        if entry.isdigit():
+            try:
+                with open(f'/proc/{entry}/stat') as f:
+                    ppid = int(f.read().rsplit(')', 1)[1].split()[1])
+            except (OSError, ValueError, IndexError):
+                continue  # gone meanwhile
+            children.setdefault(ppid, []).append(int(entry))
+    tree, todo = [], [pid]
+    while todo:
+        tree.append(todo.pop(0))
+        todo.extend(children.get(tree[-1], []))
+    return tree
+
+
+def stop_master(proc, sig=signal.SIGTERM, timeout=20.0):
+    """SIGTERM: roscore shuts down rosmaster and rosout itself. SIGKILL: a crash of the master's
+    machine; roslaunch starts rosmaster and rosout in sessions of their own, so every process
+    of the tree is killed, not only roscore's group."""
+    tree = process_tree(proc.pid) if sig == signal.SIGKILL else [proc.pid]
+    for pid in tree:
+        try:
+            os.kill(pid, sig)
+        except ProcessLookupError:
+            pass
     try:
         proc.wait(timeout=timeout)
     except subprocess.TimeoutExpired:
-        os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait()
+        stop_master(proc, signal.SIGKILL)
 
 
 SUBSCRIBER = f'''

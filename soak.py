@@ -14,36 +14,54 @@ simulated clock, while faults are injected at random (seeded):
 
 It reports frames, commands, the longest gap between commands, the non-zero commands published
 while the camera was out or after the lane had been lost for lost_timeout (target: 0 each),
-laps, departures, and RSS after 1,000 frames and at the end. The ROS master restart is not
-simulated here; tests/test_ros_real.py kills and restarts a real roscore.
+laps, departures, and RSS after 1,000 frames and at the end.
+
+With --ros the same loop runs in real time on Debian's ROS 1 instead of the stand-in: a real
+roscore, the node's real rospy publisher, watchdog timer and master watch, and a subscriber in
+a process of its own that logs every Twist it receives. On top of the faults above
+
+    master restart  roscore is killed (SIGKILL, as in a crash) and started again 2-8 s later
+                    (the node must hold the robot stopped, then register again and drive on)
+
+and it also reports what the subscriber received: commands, the longest gap between them, the
+non-zero commands published while the master was gone (after the master watch had had time
+to notice), and how long after the master's return the robot drove again. The loop runs at
+--rate 20 by default there, so 10,000 frames take about 9 minutes instead of 42.
 
 usage:
     python soak.py                           10,000 frames on the oval, improved controller
     python soak.py --frames 2000 --track s_bend --json out/soak.json
+    python soak.py --ros --json out/soak_ros.json
 """
 
 import argparse
 import json
 import math
 import os
+import signal
 import sys
+import tempfile
+import threading
+import time
 
 import numpy as np
 
 from bench import rss_mb
 from calibration import LECTURE_CAMERA
-from kobuki_lane import LaneFollower, LaneParams
+from kobuki_lane import LaneFollower, LaneParams, MasterWatch, install_signal_handlers
 from rospy_standin import SimClock, StandInRospy, Twist
 from simulate import TrackSimulator, make_controller
 from tracks import BUILTIN, load_track
 
-FAULTS = {  # chance per frame, and duration range [s]
-    'camera outage': (0.002, (0.5, 4.0)),
-    'slow read': (0.003, (0.5, 2.0)),
-    'covered camera': (0.002, (1.5, 4.0)),
-    'slow frame': (0.003, (0.5, 1.0)),
-    'pipeline error': (0.002, (0.0, 0.0)),
+FAULTS = {  # how often each starts, per second of running, and its duration range [s]
+    'camera outage': (0.008, (0.5, 4.0)),
+    'slow read': (0.012, (0.5, 2.0)),
+    'covered camera': (0.008, (1.5, 4.0)),
+    'slow frame': (0.012, (0.5, 1.0)),
+    'pipeline error': (0.008, (0.0, 0.0)),
 }
+MASTER_RESTART = (0.02, (2.0, 8.0))  # --ros only: roscore killed, started again this much later
+MASTER_SPACING = 15.0  # [s] a master restart starts at least this long after the last ended
 
 
 class FaultySimulator:
@@ -53,11 +71,12 @@ class FaultySimulator:
     skipped = 0
     total = None
 
-    def __init__(self, track, ros, rng, frames):
+    def __init__(self, track, ros, rng, frames, rate, master=None):
         self.track, self.ros, self.rng, self.limit = track, ros, rng, frames
+        self.rate, self.master = rate, master
         self.name = f'simulated {track}'
         self.commands = []  # (t, linear.x, angular.z) of every Twist published
-        self.outages, self.covered = [], []  # [start, end] in simulated seconds
+        self.outages, self.covered = [], []  # [start, end] in the clock's seconds
         self.injected = dict.fromkeys(FAULTS, 0)
         self.laps = self.departures = self.frames = 0
         self.lap_ends = []  # (time, why)
@@ -73,23 +92,31 @@ class FaultySimulator:
             self.ros.listeners.append(self._record)
             self.sim = TrackSimulator(load_track(self.track), self.ros,
                                       seed=int(self.rng.integers(1e9)))
+            self.sim.restart(self.ros.get_time())
             return
         self.laps += self.sim.ended == 'completed'
         self.departures += len(self.sim.departure_points)
         self.sim.restart(self.ros.get_time())
 
-    def _starts(self, fault):
-        chance, (low, high) = FAULTS[fault]
-        if self.rng.random() >= chance:
+    def chance(self, per_second, span):
+        """A fault starting at this frame? Its duration if so (0.0 for an instant), else None."""
+        if self.rng.random() >= per_second / self.rate:
             return None
-        self.injected[fault] += 1
-        return self.rng.uniform(low, high)
+        return self.rng.uniform(*span)
+
+    def _starts(self, fault):
+        length = self.chance(*FAULTS[fault])
+        if length is not None:
+            self.injected[fault] += 1
+        return length
 
     def read(self):
         now = self.ros.get_time()
         if self.frames >= self.limit:
             self.live = False  # the end of the soak, not a lost camera
             return False, None, None
+        if self.master is not None:
+            self.master.maybe_restart(self, now)
         if self.outages and now < self.outages[-1][1]:
             return False, None, self.frames
         # outages are spaced out: two back to back are one long loss, which ends the run
@@ -137,7 +164,7 @@ class FaultyController:
         delay = self.source._starts('slow frame')
         if delay:
             self.source.ros.clock.sleep(delay)
-        if self.source._starts('pipeline error'):
+        if self.source._starts('pipeline error') is not None:  # (its duration is 0.0)
             raise RuntimeError('injected pipeline error')
         return self.inner.perceive(frame, camera)
 
@@ -157,28 +184,186 @@ def moving(commands, intervals, grace=0.0):
     return count
 
 
-def soak(track='oval', controller='improved', frames=10000, seed=0, progress=True):
-    ros = StandInRospy(SimClock(), quiet=True, keep=100)
+# ---------------------------------------------------------------- the ROS variant
+
+class WallTime:
+    """The simulator's clock on real ROS: wall time, as rospy.get_time() without sim time."""
+
+    @staticmethod
+    def now():
+        return time.time()
+
+    @staticmethod
+    def sleep(seconds):
+        if seconds > 0:
+            time.sleep(seconds)
+
+
+class TappedPublisher:
+    def __init__(self, pub, topic, ros):
+        self._pub, self._topic, self._ros = pub, topic, ros
+
+    def publish(self, msg):
+        for listener in self._ros.listeners:
+            listener(time.time(), self._topic, msg)
+        self._pub.publish(msg)
+
+    def __getattr__(self, name):
+        return getattr(self._pub, name)
+
+
+class TappedRospy:
+    """rospy itself, except that every message the node publishes is also handed to
+    `listeners`: the simulated base drives on the Twists as they are published, while a real
+    subscriber in another process measures what ROS delivers."""
+
+    def __init__(self, rospy):
+        self._rospy, self.listeners, self.clock = rospy, [], WallTime()
+
+    def __getattr__(self, name):
+        return getattr(self._rospy, name)
+
+    def Publisher(self, topic, data_class, **kwargs):
+        return TappedPublisher(self._rospy.Publisher(topic, data_class, **kwargs), topic, self)
+
+
+class RealRos:
+    """A roscore that the soak kills and restarts at random, this process as the node, and a
+    subscriber process logging what it receives."""
+
+    def __init__(self, rng):
+        from roslive import Listener, free_port, node_env, start_master
+
+        self.rng, self._start_master = rng, start_master
+        self.port = free_port()
+        self.home = tempfile.mkdtemp(prefix='kobuki_lane_soak_')
+        uri = f'http://localhost:{self.port}'
+        self.env = node_env(uri, self.home)
+        os.environ.update(ROS_MASTER_URI=uri, ROS_HOSTNAME='localhost', ROS_HOME=self.home,
+                          ROS_LOG_DIR=self.home)
+        os.environ.pop('ROS_IP', None)
+        self.master = start_master(self.port, self.env)
+        self.outages = []  # [killed at, answering again at] (wall time)
+        self._restarting = None  # the thread starting roscore again
+        self.listener = Listener(self.env, os.path.join(self.home, 'received.log'))
+        deadline = time.monotonic() + 30
+        while not self.listener.ready():
+            if time.monotonic() > deadline:
+                raise RuntimeError('the subscriber process did not start')
+            time.sleep(0.1)
+        import rospy
+        from geometry_msgs.msg import Twist as RosTwist
+
+        rospy.init_node('kobuki_lane', disable_signals=True)
+        self.ros, self.twist_type = TappedRospy(rospy), RosTwist
+
+    def maybe_restart(self, source, now):
+        """Called on every frame: kill roscore now and then, and start it again later."""
+        if self._restarting is not None and self._restarting.is_alive():
+            return
+        if self.outages and now < self.outages[-1][1] + MASTER_SPACING:
+            return
+        down_for = source.chance(*MASTER_RESTART)
+        if down_for is None:
+            return
+        from roslive import stop_master
+
+        stop_master(self.master, signal.SIGKILL)
+        self.outages.append([time.time(), math.inf])
+        self._restarting = threading.Thread(target=self._restart, args=(down_for,),
+                                            name='master-restart', daemon=True)
+        self._restarting.start()
+
+    def _restart(self, down_for):
+        time.sleep(down_for)
+        self.master = self._start_master(self.port, self.env)
+        self.outages[-1][1] = time.time()
+
+    def close(self):
+        """Wait for a restart in progress, let the last Twist arrive, stop everything;
+        returns what the subscriber received."""
+        from roslive import stop_master
+
+        if self._restarting is not None:
+            self._restarting.join()
+        time.sleep(0.5)
+        received = self.listener.messages()
+        self.listener.close()
+        self.ros.signal_shutdown('soak done')
+        stop_master(self.master)
+        return received
+
+
+def master_figures(world, commands, received, watch):
+    """What the subscriber got, and how the node behaved while the master was gone."""
+    grace = watch.period + watch.timeout  # the master watch notices within this
+    back_to_driving = []
+    for i, (_, back) in enumerate(world.outages):
+        later = world.outages[i + 1][0] if i + 1 < len(world.outages) else math.inf
+        moves = [t for t, x, z in commands if back < t < later and (x != 0.0 or z != 0.0)]
+        if moves:
+            back_to_driving.append(moves[0] - back)
+    times = np.array([t for t, _, _ in received])
+    return dict(
+        master_restarts=len(world.outages),
+        master_down_s=round(sum(b - a for a, b in world.outages), 1),
+        moving_while_master_lost=moving(commands, world.outages, grace),
+        moving_within_master_watch=(moving(commands, world.outages) -
+                                    moving(commands, world.outages, grace)),
+        driving_again_after_master_s=dict(
+            median=round(float(np.median(back_to_driving)), 2) if back_to_driving else None,
+            max=round(max(back_to_driving), 2) if back_to_driving else None,
+            restarts=len(back_to_driving)),
+        received=len(received),
+        not_received=len(commands) - len(received),
+        longest_gap_received_s=round(float(np.diff(times).max()), 3) if len(times) > 1 else None,
+        last_received_is_stop=bool(received) and received[-1][1:] == (0.0, 0.0))
+
+
+# ---------------------------------------------------------------- the soak
+
+def soak(track='oval', controller='improved', frames=10000, seed=0, progress=True, rate=4.0,
+         real_ros=False, handle_signals=False):
     rng = np.random.default_rng(seed)
-    source = FaultySimulator(track, ros, rng, frames)
-    params = LaneParams()
-    inner = make_controller(controller, load_track(track), params)
-    follower = LaneFollower(ros, Twist, source, params, LECTURE_CAMERA,
-                            controller=FaultyController(inner, source))
-    if progress:
-        follower.progress.enabled, follower.progress.total = True, frames
-    ended = follower.run()
+    params = LaneParams(rate=rate)
+    world = watch = None
+    if real_ros:
+        world = RealRos(rng)
+        ros, twist_type = world.ros, world.twist_type
+    else:
+        ros, twist_type = StandInRospy(SimClock(), quiet=True, keep=100), Twist
+    try:
+        source = FaultySimulator(track, ros, rng, frames, rate, master=world)
+        inner = make_controller(controller, load_track(track), params)
+        follower = LaneFollower(ros, twist_type, source, params, LECTURE_CAMERA,
+                                controller=FaultyController(inner, source),
+                                wait_for_base=10.0 if real_ros else 0.0)
+        if handle_signals:  # Ctrl-C ends the soak with the robot stopped and its figures
+            install_signal_handlers(follower)
+        if progress:
+            follower.progress.enabled, follower.progress.total = True, frames
+        if real_ros:
+            watch = MasterWatch(follower, ros).start()
+        started = ros.get_time()
+        ended = follower.run()
+        elapsed = ros.get_time() - started
+    finally:
+        if watch is not None:
+            watch.stop()
+        received = world.close() if world is not None else None
     source._new_lap()  # count the lap in progress
     times = np.array([t for t, _, _ in source.commands])
     lost_timeout = getattr(getattr(inner, 'p', None), 'lost_timeout', 0.0)
-    return dict(
-        track=track, controller=controller, seed=seed, ended=ended, frames=follower.frames,
-        simulated_s=round(ros.get_time(), 1), commands=len(source.commands),
+    result = dict(
+        track=track, controller=controller, seed=seed, rate_hz=rate,
+        ros='real roscore and rospy' if real_ros else 'stand-in, simulated clock',
+        ended=ended, frames=follower.frames,
+        seconds=round(elapsed, 1), commands=len(source.commands),
         longest_gap_s=round(float(np.diff(times).max()), 3),
         faults=source.injected, laps_completed=source.laps, departures=source.departures,
         lap_ends={why: sum(1 for _, w in source.lap_ends if w == why)
                   for why in sorted({w for _, w in source.lap_ends})},
-        watchdog_stops=follower.watchdog_stops,
+        watchdog_stops=follower.watchdog_stops, frames_failed=follower.failed,
         moving_while_camera_out=moving(source.commands, source.outages),
         moving_after_lane_lost=moving(source.commands, source.covered,
                                       lost_timeout + 1.0 / params.rate),
@@ -189,6 +374,9 @@ def soak(track='oval', controller='improved', frames=10000, seed=0, progress=Tru
         rss_end_mb=round(source.rss.get(frames, math.nan), 1),
         rss_growth_mb=round(source.rss.get(frames, math.nan) - source.rss.get(1000, math.nan),
                             2))
+    if real_ros:
+        result.update(master_figures(world, source.commands, received, watch))
+    return result
 
 
 def main(argv=None):
@@ -198,13 +386,28 @@ def main(argv=None):
     parser.add_argument('--controller', default='improved', choices=('lecture', 'improved'))
     parser.add_argument('--frames', type=int, default=10000, help='default: 10000')
     parser.add_argument('--seed', type=int, default=0)
+    parser.add_argument('--ros', action='store_true',
+                        help="real time on Debian's ROS 1 (a real roscore, restarted at random) "
+                             'instead of the stand-in on a simulated clock')
+    parser.add_argument('--rate', type=float, metavar='HZ',
+                        help='loop rate (default: 4, as on the robot; 20 with --ros)')
     parser.add_argument('--json', metavar='FILE', help='write the figures as JSON')
     args = parser.parse_args(argv)
     if args.frames < 1000:
         parser.error('--frames must be at least 1000 (RSS is compared with frame 1,000)')
+    rate = args.rate or (20.0 if args.ros else 4.0)
+    if not (math.isfinite(rate) and 0 < rate <= 30):
+        parser.error(f'--rate {args.rate}: must be above 0 and at most 30 Hz')
     if args.json and not os.path.isdir(os.path.dirname(os.path.abspath(args.json))):
         parser.error(f"--json '{args.json}': folder does not exist")
-    result = soak(args.track, args.controller, args.frames, args.seed, sys.stderr.isatty())
+    if args.ros:
+        import shutil
+
+        if shutil.which('roscore') is None:
+            parser.error("--ros needs Debian's ros-core (roscore); 'bash setup.sh test' "
+                         'installs it')
+    result = soak(args.track, args.controller, args.frames, args.seed, sys.stderr.isatty(),
+                  rate, args.ros, handle_signals=True)
     for key, value in result.items():
         print(f'{key}: {value}')
     if args.json:

@@ -201,3 +201,31 @@ def test_debug_image_topic_carries_annotated_frames(roscore, few_frames):
 
     image = cv2.imdecode(np.frombuffer(got[-1].data, np.uint8), cv2.IMREAD_COLOR)
     assert got[-1].format == 'jpeg' and image.shape == (480, 640, 3)
+
+
+SOAK = '''
+import json, sys
+import soak
+soak.MASTER_RESTART = (1.0, (2.0, 3.0))  # a restart within the first seconds, then spaced
+soak.MASTER_SPACING = 6.0
+print(json.dumps(soak.soak('oval', 'improved', frames=360, seed=5, progress=False,
+                           rate=20.0, real_ros=True)))
+'''
+
+
+def test_ros_soak_holds_the_robot_through_master_crashes():
+    """soak.py --ros in small: roscore killed (SIGKILL) and restarted under the running loop."""
+    proc = subprocess.run([sys.executable, '-c', SOAK], cwd=REPO, capture_output=True,
+                          text=True, timeout=180)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    result = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert result['ros'] == 'real roscore and rospy' and result['frames'] == 360
+    assert result['master_restarts'] >= 1
+    assert result['moving_while_master_lost'] == 0
+    assert result['driving_again_after_master_s']['restarts'] >= 1
+    assert result['driving_again_after_master_s']['max'] < 3.0
+    assert result['received'] >= 0.99 * result['commands']
+    assert result['longest_gap_received_s'] < 0.6  # inside the Kobuki's own timeout
+    assert result['last_received_is_stop']
+    assert 'does not answer: robot held stopped' in proc.stderr
+    assert 'is back: registered' in proc.stderr

@@ -243,8 +243,9 @@ def test_simulate_rejects_bad_scene_flags(args, capsys):
 def test_soak_with_frequent_faults_never_moves_while_blind(monkeypatch):
     import soak
 
-    # every fault far more often than in the benchmark, so a short run meets each of them
-    monkeypatch.setattr(soak, 'FAULTS', {name: (0.04, span)
+    # every fault far more often than in the benchmark (0.04 per frame at 4 Hz), so a short
+    # run meets each of them
+    monkeypatch.setattr(soak, 'FAULTS', {name: (0.16, span)
                                          for name, (_, span) in soak.FAULTS.items()})
     result = soak.soak('oval', 'improved', frames=160, seed=3, progress=False)
     assert all(count > 0 for count in result['faults'].values()), result['faults']
@@ -253,6 +254,7 @@ def test_soak_with_frequent_faults_never_moves_while_blind(monkeypatch):
     assert result['moving_while_camera_out'] == 0
     assert result['moving_after_lane_lost'] == 0
     assert result['watchdog_stops'] > 0
+    assert result['frames_failed'] == result['faults']['pipeline error']  # each one raised
 
 
 def test_soak_counts_commands_inside_fault_intervals():
