@@ -160,6 +160,28 @@ def test_outputs_in_a_missing_folder_are_refused_before_the_run(tmp_path):
     assert 'frame 0' not in proc.stdout
 
 
+@pytest.mark.parametrize('flag', ['--decisions', '--video', '--bag', '--stages'])
+def test_outputs_in_a_read_only_folder_are_refused_before_the_run(flag):
+    """Root may write anywhere, so as root the node runs as 'nobody' (as on a robot, where the
+    node is not root); the folder is read-only to it either way."""
+    import tempfile
+
+    folder = tempfile.mkdtemp(prefix='kobuki_lane_ro_')
+    try:
+        os.chmod(folder, 0o555)
+        target = folder if flag == '--stages' else os.path.join(folder, 'out.x')
+        drop = dict(user='nobody', group='nogroup', extra_groups=[]) if os.geteuid() == 0 else {}
+        proc = subprocess.run([sys.executable, NODE, '--source', SAMPLES, '--dry-run', flag,
+                               target], cwd=REPO, capture_output=True, text=True, timeout=60,
+                              **drop)
+        assert proc.returncode == 2, proc.stderr
+        assert 'not writable' in proc.stderr and 'Traceback' not in proc.stderr
+        assert 'frame 0' not in proc.stdout and os.listdir(folder) == []
+    finally:
+        os.chmod(folder, 0o755)
+        shutil.rmtree(folder)
+
+
 def test_show_without_a_display_is_a_clear_error():
     env = {k: v for k, v in os.environ.items() if k not in ('DISPLAY', 'WAYLAND_DISPLAY')}
     proc = cli('--source', SAMPLES, '--dry-run', '--show', env=env)
