@@ -38,6 +38,7 @@ import argparse
 import json
 import math
 import os
+import shutil
 import signal
 import sys
 import tempfile
@@ -49,6 +50,7 @@ import numpy as np
 from bench import rss_mb
 from calibration import LECTURE_CAMERA
 from kobuki_lane import LaneFollower, LaneParams, MasterWatch, install_signal_handlers
+from roslive import Listener, free_port, node_env, start_master, stop_master
 from rospy_standin import SimClock, StandInRospy, Twist
 from simulate import TrackSimulator, make_controller
 from tracks import BUILTIN, load_track
@@ -200,6 +202,8 @@ class WallTime:
 
 
 class TappedPublisher:
+    """A rospy Publisher that also hands each message to TappedRospy's listeners."""
+
     def __init__(self, pub, topic, ros):
         self._pub, self._topic, self._ros = pub, topic, ros
 
@@ -231,10 +235,7 @@ class RealRos:
     """A roscore that the soak kills and restarts at random, this process as the node, and a
     subscriber process logging what it receives."""
 
-    def __init__(self, rng):
-        from roslive import Listener, free_port, node_env, start_master
-
-        self.rng, self._start_master = rng, start_master
+    def __init__(self):
         self.port = free_port()
         self.home = tempfile.mkdtemp(prefix='kobuki_lane_soak_')
         uri = f'http://localhost:{self.port}'
@@ -266,8 +267,6 @@ class RealRos:
         down_for = source.chance(*MASTER_RESTART)
         if down_for is None:
             return
-        from roslive import stop_master
-
         stop_master(self.master, signal.SIGKILL)
         self.outages.append([time.time(), math.inf])
         self._restarting = threading.Thread(target=self._restart, args=(down_for,),
@@ -276,14 +275,12 @@ class RealRos:
 
     def _restart(self, down_for):
         time.sleep(down_for)
-        self.master = self._start_master(self.port, self.env)
+        self.master = start_master(self.port, self.env)
         self.outages[-1][1] = time.time()
 
     def close(self):
         """Wait for a restart in progress, let the last Twist arrive, stop everything;
         returns what the subscriber received."""
-        from roslive import stop_master
-
         if self._restarting is not None:
             self._restarting.join()
         time.sleep(0.5)
@@ -328,7 +325,7 @@ def soak(track='oval', controller='improved', frames=10000, seed=0, progress=Tru
     params = LaneParams(rate=rate)
     world = watch = None
     if real_ros:
-        world = RealRos(rng)
+        world = RealRos()
         ros, twist_type = world.ros, world.twist_type
     else:
         ros, twist_type = StandInRospy(SimClock(), quiet=True, keep=100), Twist
@@ -401,8 +398,6 @@ def main(argv=None):
     if args.json and not os.path.isdir(os.path.dirname(os.path.abspath(args.json))):
         parser.error(f"--json '{args.json}': folder does not exist")
     if args.ros:
-        import shutil
-
         if shutil.which('roscore') is None:
             parser.error("--ros needs Debian's ros-core (roscore); 'bash setup.sh test' "
                          'installs it')
