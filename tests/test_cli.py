@@ -160,23 +160,52 @@ def test_outputs_in_a_missing_folder_are_refused_before_the_run(tmp_path):
     assert 'frame 0' not in proc.stdout
 
 
+def run_main_as_nobody(argv):
+    """kobuki_lane.main(argv) in a forked child that, if we are root, becomes 'nobody' first
+    (root may write anywhere; on a robot the node is not root). Returns (status, output).
+    The child runs the already imported code, so it needs no access to this checkout."""
+    import pwd
+
+    nobody = pwd.getpwnam('nobody')
+    r, w = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: never returns into pytest
+        code = 99
+        try:
+            os.dup2(w, 1)
+            os.dup2(w, 2)
+            # pytest has replaced sys.stdout and sys.stderr; write to the pipe instead
+            sys.stdout = sys.stderr = open(1, 'w', closefd=False)
+            if os.geteuid() == 0:
+                os.setgroups([])
+                os.setgid(nobody.pw_gid)
+                os.setuid(nobody.pw_uid)
+            try:
+                code = main(argv)
+            except SystemExit as e:
+                code = e.code if isinstance(e.code, int) else 1
+        finally:
+            sys.stdout.flush()
+            os._exit(code)
+    os.close(w)
+    with os.fdopen(r) as f:
+        output = f.read()
+    _, status = os.waitpid(pid, 0)
+    return os.waitstatus_to_exitcode(status), output
+
+
 @pytest.mark.parametrize('flag', ['--decisions', '--video', '--bag', '--stages'])
 def test_outputs_in_a_read_only_folder_are_refused_before_the_run(flag):
-    """Root may write anywhere, so as root the node runs as 'nobody' (as on a robot, where the
-    node is not root); the folder is read-only to it either way."""
     import tempfile
 
     folder = tempfile.mkdtemp(prefix='kobuki_lane_ro_')
     try:
         os.chmod(folder, 0o555)
         target = folder if flag == '--stages' else os.path.join(folder, 'out.x')
-        drop = dict(user='nobody', group='nogroup', extra_groups=[]) if os.geteuid() == 0 else {}
-        proc = subprocess.run([sys.executable, NODE, '--source', SAMPLES, '--dry-run', flag,
-                               target], cwd=REPO, capture_output=True, text=True, timeout=60,
-                              **drop)
-        assert proc.returncode == 2, proc.stderr
-        assert 'not writable' in proc.stderr and 'Traceback' not in proc.stderr
-        assert 'frame 0' not in proc.stdout and os.listdir(folder) == []
+        status, output = run_main_as_nobody(['--source', SAMPLES, '--dry-run', flag, target])
+        assert status == 2, output
+        assert 'not writable' in output and 'Traceback' not in output
+        assert 'frame 0' not in output and os.listdir(folder) == []
     finally:
         os.chmod(folder, 0o755)
         shutil.rmtree(folder)
