@@ -49,6 +49,7 @@ from floor_camera import FloorCamera, FloorMap
 from frames import ListSource
 from kobuki_lane import Detection, LaneFollower, LaneParams, Layout, Pipeline, slope_sum
 from rospy_standin import SimClock, StandInRospy, Twist
+from settings import output_problem
 from tracks import BUILTIN, load_track
 
 SAMPLES = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'samples', 'track')
@@ -435,8 +436,9 @@ def main(argv=None):
     if argv[:1] == ['--memory-child']:
         return memory_child(int(argv[1]))
     args = build_parser().parse_args(argv)
-    if args.json and not os.path.isdir(os.path.dirname(os.path.abspath(args.json))):
-        print(f"bench.py: error: --json '{args.json}': folder does not exist", file=sys.stderr)
+    problem = args.json and output_problem(args.json)
+    if problem:
+        print(f"bench.py: error: --json '{args.json}': {problem}", file=sys.stderr)
         return 2
     if args.quick:
         args.sim_frames, args.repeats = 60, 1

@@ -30,6 +30,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from settings import output_problem
+
 
 class CalibrationError(ValueError):
     """A calibration file that cannot be used; the message names the file and the field."""
@@ -247,15 +249,13 @@ def positive_float(text):
 
 def run_calibration(args):
     import glob
-    import os
 
     paths = sorted(glob.glob(args.images))
     if not paths:
         raise CalibrationError(f"no files match '{args.images}' (quote the pattern)")
-    folder = os.path.dirname(os.path.abspath(args.output))
-    if not os.path.isdir(folder) or not os.access(folder, os.W_OK):
-        raise CalibrationError(f"cannot write '{args.output}': folder '{folder}' is missing "
-                               'or read-only')
+    problem = output_problem(args.output)
+    if problem:
+        raise CalibrationError(f"cannot write '{args.output}': {problem}")
     result = calibrate(paths, args.pattern, args.square, args.name)
     for path, why in result.unusable:
         print(f'not used: {path}: {why}', file=sys.stderr)

@@ -40,6 +40,7 @@ import numpy as np
 from calibration import Camera
 from kobuki_lane import LaneParams, LectureRule, detect
 from lane_control import ImprovedController, ImprovedParams
+from settings import output_problem
 
 DUCKIEBOT_K = np.array([[307.7379294605756, 0, 329.692367951685],
                         [0, 314.9827773443905, 244.4605588877848], [0, 0, 1]])
@@ -137,6 +138,10 @@ def main(argv=None):
     args = parser.parse_args(argv)
     if not os.path.isfile(os.path.join(args.folder, 'labels.csv')):
         print(f"evaluate_real.py: error: no labels.csv in '{args.folder}'", file=sys.stderr)
+        return 2
+    problem = args.json and output_problem(args.json)
+    if problem:  # before the evaluation, not after it
+        print(f"evaluate_real.py: error: --json '{args.json}': {problem}", file=sys.stderr)
         return 2
     results = evaluate(args.folder)
     report(results, args.details)

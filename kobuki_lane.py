@@ -47,7 +47,7 @@ import numpy as np
 
 from calibration import CalibrationError, load_calibration, undistortion_maps
 from frames import Prefetch, SourceError, open_source
-from settings import add_arguments, finite, positive, resolve, setting
+from settings import add_arguments, finite, output_problem, positive, resolve, setting
 
 TOPIC = '/mobile_base/commands/velocity'  # kobuki_node's velocity command input
 
@@ -866,14 +866,9 @@ def fail(message):
 
 def check_output(path, what):
     """Refuse an output path whose folder is missing or read-only before the run starts."""
-    folder = os.path.dirname(os.path.abspath(path))
-    problem = None
-    if not os.path.isdir(folder):
-        problem = 'does not exist'
-    elif not os.access(folder, os.W_OK):
-        problem = 'is not writable'
+    problem = output_problem(path)
     if problem:
-        fail(f"{what} '{path}': folder '{folder}' {problem}")
+        fail(f"{what} '{path}': {problem}")
 
 
 def master_online(timeout=3.0):

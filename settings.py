@@ -6,6 +6,18 @@ parameters and defaults in that order (`resolve`), and is checked (`validate`).
 
 import dataclasses
 import math
+import os
+
+
+def output_problem(path):
+    """Why an output file cannot be written at `path`, checked before a run starts, or None:
+    "folder '...' does not exist" or "folder '...' is not writable"."""
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        return f"folder '{folder}' does not exist"
+    if not os.access(folder, os.W_OK):
+        return f"folder '{folder}' is not writable"
+    return None
 
 
 def setting(default, help, unit='', check=None, choices=None):

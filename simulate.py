@@ -26,7 +26,6 @@ tight. Track files: see tracks.py.
 import argparse
 import json
 import math
-import os
 import sys
 from dataclasses import dataclass
 
@@ -38,6 +37,7 @@ from floor_camera import FloorCamera, FloorMap, Track
 from kobuki_lane import LaneFollower, LaneParams, LectureRule, VideoSink
 from lane_control import ImprovedController, ImprovedParams
 from rospy_standin import SimClock, StandInRospy, Twist
+from settings import output_problem
 from tracks import BUILTIN, TrackError, load_track
 
 STALL_TIME = 30.0  # [s] without 5 cm of progress ends a run
@@ -433,8 +433,9 @@ def fail(message):
 
 def check_outputs(args):
     for path in (args.json, args.plot, args.video):
-        if path and not os.path.isdir(os.path.dirname(os.path.abspath(path))):
-            fail(f"cannot write '{path}': its folder does not exist")
+        problem = path and output_problem(path)
+        if problem:
+            fail(f"cannot write '{path}': {problem}")
 
 
 def customise(spec, args):

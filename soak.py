@@ -52,6 +52,7 @@ from calibration import LECTURE_CAMERA
 from kobuki_lane import LaneFollower, LaneParams, MasterWatch, install_signal_handlers
 from roslive import Listener, free_port, node_env, start_master, stop_master
 from rospy_standin import SimClock, StandInRospy, Twist
+from settings import output_problem
 from simulate import TrackSimulator, make_controller
 from tracks import BUILTIN, load_track
 
@@ -395,8 +396,9 @@ def main(argv=None):
     rate = args.rate or (20.0 if args.ros else 4.0)
     if not (math.isfinite(rate) and 0 < rate <= 30):
         parser.error(f'--rate {args.rate}: must be above 0 and at most 30 Hz')
-    if args.json and not os.path.isdir(os.path.dirname(os.path.abspath(args.json))):
-        parser.error(f"--json '{args.json}': folder does not exist")
+    problem = args.json and output_problem(args.json)
+    if problem:
+        parser.error(f"--json '{args.json}': {problem}")
     if args.ros:
         if shutil.which('roscore') is None:
             parser.error("--ros needs Debian's ros-core (roscore); 'bash setup.sh test' "

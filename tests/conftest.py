@@ -2,6 +2,7 @@
 
 import os
 import shutil
+import sys
 import threading
 import time
 
@@ -80,3 +81,37 @@ def few_frames(tmp_path):
     for name in names[::3][:8]:
         shutil.copy(os.path.join(SAMPLES, name), folder / name)
     return folder
+
+
+def run_as_nobody(main, argv):
+    """main(argv) in a forked child that, if we are root, becomes 'nobody' first
+    (root may write anywhere; on a robot the node is not root). Returns (status, output).
+    The child runs the already imported code, so it needs no access to this checkout."""
+    import pwd
+
+    nobody = pwd.getpwnam('nobody')
+    r, w = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: never returns into pytest
+        code = 99
+        try:
+            os.dup2(w, 1)
+            os.dup2(w, 2)
+            # pytest has replaced sys.stdout and sys.stderr; write to the pipe instead
+            sys.stdout = sys.stderr = open(1, 'w', closefd=False)
+            if os.geteuid() == 0:
+                os.setgroups([])
+                os.setgid(nobody.pw_gid)
+                os.setuid(nobody.pw_uid)
+            try:
+                code = main(argv) or 0
+            except SystemExit as e:
+                code = e.code if isinstance(e.code, int) else 1
+        finally:
+            sys.stdout.flush()
+            os._exit(code)
+    os.close(w)
+    with os.fdopen(r) as f:
+        output = f.read()
+    _, status = os.waitpid(pid, 0)
+    return os.waitstatus_to_exitcode(status), output

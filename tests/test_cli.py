@@ -11,7 +11,7 @@ import time
 import cv2
 import numpy as np
 import pytest
-from conftest import REPO, SAMPLES
+from conftest import REPO, SAMPLES, run_as_nobody
 
 import kobuki_lane
 from calibration import LECTURE_CAMERA
@@ -160,40 +160,6 @@ def test_outputs_in_a_missing_folder_are_refused_before_the_run(tmp_path):
     assert 'frame 0' not in proc.stdout
 
 
-def run_main_as_nobody(argv):
-    """kobuki_lane.main(argv) in a forked child that, if we are root, becomes 'nobody' first
-    (root may write anywhere; on a robot the node is not root). Returns (status, output).
-    The child runs the already imported code, so it needs no access to this checkout."""
-    import pwd
-
-    nobody = pwd.getpwnam('nobody')
-    r, w = os.pipe()
-    pid = os.fork()
-    if pid == 0:  # the child: never returns into pytest
-        code = 99
-        try:
-            os.dup2(w, 1)
-            os.dup2(w, 2)
-            # pytest has replaced sys.stdout and sys.stderr; write to the pipe instead
-            sys.stdout = sys.stderr = open(1, 'w', closefd=False)
-            if os.geteuid() == 0:
-                os.setgroups([])
-                os.setgid(nobody.pw_gid)
-                os.setuid(nobody.pw_uid)
-            try:
-                code = main(argv)
-            except SystemExit as e:
-                code = e.code if isinstance(e.code, int) else 1
-        finally:
-            sys.stdout.flush()
-            os._exit(code)
-    os.close(w)
-    with os.fdopen(r) as f:
-        output = f.read()
-    _, status = os.waitpid(pid, 0)
-    return os.waitstatus_to_exitcode(status), output
-
-
 @pytest.mark.parametrize('flag', ['--decisions', '--video', '--bag', '--stages'])
 def test_outputs_in_a_read_only_folder_are_refused_before_the_run(flag):
     import tempfile
@@ -202,13 +168,52 @@ def test_outputs_in_a_read_only_folder_are_refused_before_the_run(flag):
     try:
         os.chmod(folder, 0o555)
         target = folder if flag == '--stages' else os.path.join(folder, 'out.x')
-        status, output = run_main_as_nobody(['--source', SAMPLES, '--dry-run', flag, target])
+        status, output = run_as_nobody(main, ['--source', SAMPLES, '--dry-run', flag, target])
         assert status == 2, output
         assert 'not writable' in output and 'Traceback' not in output
         assert 'frame 0' not in output and os.listdir(folder) == []
     finally:
         os.chmod(folder, 0o755)
         shutil.rmtree(folder)
+
+
+def tool_mains(labels_folder):
+    """(name, main, argv before the output path) of every command line that writes a file."""
+    import bench
+    import calibration
+    import evaluate_real
+    import simulate
+    import soak
+
+    return [('bench.py', bench.main, ['--quick', '--json']),
+            ('soak.py', soak.main, ['--json']),
+            ('simulate.py', simulate.main, ['--track', 'lecture', '--json']),
+            ('evaluate_real.py', evaluate_real.main, [labels_folder, '--json']),
+            ('calibration.py', calibration.main,
+             ['--images', os.path.join(SAMPLES, '*.jpg'), '-o'])]
+
+
+@pytest.mark.parametrize('read_only', [False, True], ids=['missing folder', 'read-only folder'])
+def test_every_tool_refuses_an_unwritable_output_before_its_run(read_only):
+    import tempfile
+
+    labels = tempfile.mkdtemp(prefix='kobuki_lane_labels_')
+    folder = tempfile.mkdtemp(prefix='kobuki_lane_ro_')
+    try:
+        os.chmod(labels, 0o755)
+        open(os.path.join(labels, 'labels.csv'), 'w').close()
+        os.chmod(folder, 0o555)
+        target = os.path.join(folder if read_only else os.path.join(folder, 'no'), 'out.json')
+        for name, tool, argv in tool_mains(labels):
+            status, output = run_as_nobody(tool, [*argv, target])
+            assert status == 2, (name, output)
+            assert ('not writable' if read_only else 'does not exist') in output, (name, output)
+            assert 'Traceback' not in output, (name, output)
+        assert os.listdir(folder) == []
+    finally:
+        os.chmod(folder, 0o755)
+        shutil.rmtree(folder)
+        shutil.rmtree(labels)
 
 
 def test_show_without_a_display_is_a_clear_error():
