@@ -10,7 +10,7 @@ import subprocess
 import sys
 import time
 
-from conftest import REPO
+from conftest import REPO, SAMPLES
 
 from roslive import Listener, free_port, start_master, stop_master
 
@@ -25,6 +25,13 @@ def read_jsonl(path):
 def run_node(roscore, args, timeout=60):
     return subprocess.run([sys.executable, NODE, *args], env=roscore['env'], cwd=REPO,
                           capture_output=True, text=True, timeout=timeout)
+
+
+def start_node_on_samples(roscore):
+    """The node on samples/track (28 frames, 7 s at 4 Hz), for tests that stop it early."""
+    return subprocess.Popen([sys.executable, NODE, '--source', SAMPLES], env=roscore['env'],
+                            cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True)
 
 
 def assert_matches_decisions(messages, records):
@@ -54,10 +61,7 @@ def test_node_publishes_the_rule_at_4hz_and_ends_with_a_stop(roscore, twist_reco
 
 def test_sigint_stops_the_robot_before_exit(roscore, twist_recorder, tmp_path):
     # a long input, interrupted after a few commands, as Ctrl-C would
-    proc = subprocess.Popen([sys.executable, NODE, '--source', os.path.join(REPO, 'samples',
-                                                                            'track')],
-                            env=roscore['env'], cwd=REPO, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True)
+    proc = start_node_on_samples(roscore)
     twist_recorder.wait_for(4, timeout=20)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=20)
@@ -69,10 +73,7 @@ def test_sigint_stops_the_robot_before_exit(roscore, twist_recorder, tmp_path):
 
 
 def test_sigterm_stops_the_robot_before_exit(roscore, twist_recorder):
-    proc = subprocess.Popen([sys.executable, NODE, '--source', os.path.join(REPO, 'samples',
-                                                                            'track')],
-                            env=roscore['env'], cwd=REPO, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True)
+    proc = start_node_on_samples(roscore)
     twist_recorder.wait_for(3, timeout=20)
     proc.terminate()
     _, err = proc.communicate(timeout=20)
@@ -116,10 +117,7 @@ def test_roslaunch_starts_the_node_with_its_launch_parameters(roscore, twist_rec
 
 
 def test_rosnode_kill_stops_the_robot_before_exit(roscore, twist_recorder):
-    proc = subprocess.Popen([sys.executable, NODE, '--source', os.path.join(REPO, 'samples',
-                                                                            'track')],
-                            env=roscore['env'], cwd=REPO, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True)
+    proc = start_node_on_samples(roscore)
     twist_recorder.wait_for(3, timeout=20)
     kill = subprocess.run(['rosnode', 'kill', '/kobuki_lane'], env=roscore['env'],
                           capture_output=True, text=True, timeout=30)
