@@ -250,12 +250,12 @@ def positive_float(text):
 def run_calibration(args):
     import glob
 
-    paths = sorted(glob.glob(args.images))
-    if not paths:
-        raise CalibrationError(f"no files match '{args.images}' (quote the pattern)")
     problem = output_problem(args.output)
     if problem:
         raise CalibrationError(f"cannot write '{args.output}': {problem}")
+    paths = sorted(glob.glob(args.images))
+    if not paths:
+        raise CalibrationError(f"no files match '{args.images}' (quote the pattern)")
     result = calibrate(paths, args.pattern, args.square, args.name)
     for path, why in result.unusable:
         print(f'not used: {path}: {why}', file=sys.stderr)
