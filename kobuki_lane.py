@@ -215,8 +215,18 @@ class Layout:
         self.margin = p.blur_kernel // 2 + 3
         self.first = max(self.top - self.margin, 0)
         self.last = min(self.bottom + self.margin, height)
-        self.strips = self._strips(width, height) if self.mask is not None else []
-        self.band = np.zeros((self.last - self.first, width, 3), np.uint8)
+        if self.mask is None:  # algorithm 1.0: every pixel, in one piece
+            self.strips = [(0, height, 0, width)] if height and width else []
+            self.pieces = [((0, height, 0, width),) * 3] if height and width else []
+        else:
+            self.strips = self._strips(width, height)
+            self.pieces = self._pieces(width, height)
+        # remap is about a third faster on 4 channels than on 3, and each channel comes out the
+        # same, so the strips are undistorted from a BGRA copy of the part of the frame they
+        # read (bench.py: 0.26 against 0.36 ms, the copy included)
+        self.band = np.zeros((self.last - self.first, width, 4), np.uint8)
+        self.source = self._source(width, height) if self.maps is not None else None
+        self.bgra = np.zeros((height, width, 4), np.uint8)
         self.edges = np.zeros((height, width), np.uint8)  # Hough's input; zero off the band
 
     def _strips(self, width, height):
@@ -231,6 +241,49 @@ class Layout:
                                min(int(cols[-1]) + 1 + self.margin, width)))
         return strips
 
+    def _source(self, width, height):
+        """Rows and columns of the frame the strips' bilinear interpolation reads."""
+        m1 = self.maps[0]
+        xy = [m1[a:b, x0:x1].reshape(-1, 2) for a, b, x0, x1 in self.strips]
+        if not xy:
+            return 0, 0, 0, 0
+        xy = np.concatenate(xy)
+        (x0, y0), (x1, y1) = xy.min(axis=0), xy.max(axis=0) + 2  # the pixel and the next
+        return (int(np.clip(y0, 0, height)), int(np.clip(y1, 0, height)),
+                int(np.clip(x0, 0, width)), int(np.clip(x1, 0, width)))
+
+    def _pieces(self, width, height):
+        """The band's rows split in two where that leaves the fewest pixels to gray, blur and
+        edge (for the triangle, where it is half as wide as at the bottom). Per piece: rows a:b
+        and columns c0:c1 the mask reaches; the rectangle grayed and blurred (the margin round
+        it); the rectangle edged (3 px round it: an edge depends on the blurred pixels 2 px
+        away). Each rectangle is its own image to OpenCV, so its border only touches pixels
+        outside the part that is kept. bench.py: the split saves about 4 % of the frame's time,
+        a third piece nothing more."""
+        m = self.margin
+        kept = self.mask.any(axis=1)
+        lo = np.where(kept, (self.mask != 0).argmax(axis=1), width)  # first and last column
+        hi = np.where(kept, width - (self.mask[:, ::-1] != 0).argmax(axis=1), 0)  # kept + 1
+
+        def piece(a, b):
+            c0, c1 = int(lo[a:b].min(initial=width)), int(hi[a:b].max(initial=0))
+            if c1 <= c0:
+                return None
+            gray = (max(a - m, 0), min(b + m, height), max(c0 - m, 0), min(c1 + m, width))
+            edge = (max(a - 3, gray[0]), min(b + 3, gray[1]), max(c0 - 3, gray[2]),
+                    min(c1 + 3, gray[3]))
+            return (a, b, c0, c1), gray, edge
+
+        def area(pieces):
+            return sum((g1 - g0) * (gc1 - gc0) for _, (g0, g1, gc0, gc1), _ in pieces)
+
+        best = [q for q in [piece(self.top, self.bottom)] if q]
+        for at in range(self.top + 1, self.bottom):
+            two = [q for q in (piece(self.top, at), piece(at, self.bottom)) if q]
+            if area(two) < area(best):
+                best = two
+        return best
+
     def matches(self, width, height, camera, roi, p):
         return (self.key == (width, height, p.algorithm, p.blur_kernel)
                 and self.camera is camera and self.roi is roi)
@@ -242,13 +295,15 @@ class Layout:
         return cv2.remap(raw, *self.maps, cv2.INTER_LINEAR)
 
     def undistort_band(self, raw):
-        """Rows first:last of the undistorted frame, right wherever the mask's edges can
-        depend on them (elsewhere whatever an earlier frame left)."""
+        """Rows first:last of the undistorted frame, as BGRA, right wherever the mask's edges
+        can depend on them (elsewhere whatever an earlier frame left)."""
         if self.maps is None:
             return raw[self.first:self.last]
         m1, m2 = self.maps
+        y0, y1, x0, x1 = self.source
+        cv2.cvtColor(raw[y0:y1, x0:x1], cv2.COLOR_BGR2BGRA, dst=self.bgra[y0:y1, x0:x1])
         for a, b, x0, x1 in self.strips:
-            cv2.remap(raw, m1[a:b, x0:x1], m2[a:b, x0:x1], cv2.INTER_LINEAR,
+            cv2.remap(self.bgra, m1[a:b, x0:x1], m2[a:b, x0:x1], cv2.INTER_LINEAR,
                       dst=self.band[a - self.first:b - self.first, x0:x1])
         return self.band
 
@@ -286,28 +341,22 @@ class Pipeline:
         raw = as_bgr(frame)
         height, width = raw.shape[:2]
         lay = self.layout(width, height, camera, roi)
-        whole = (keep_stages or p.canny_low != p.canny_high or lay.mask is None
-                 or lay.top == lay.bottom)
+        whole = keep_stages or p.canny_low != p.canny_high or lay.top == lay.bottom
         first = 0 if whole else lay.first
         image = lay.undistort(raw) if whole else lay.undistort_band(raw)
         mark('undistort')
-        # fixed: the lecture takes gray from the raw frame, so undistortion had no effect
-        gray = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
-        mark('gray')
-        blurred = cv2.GaussianBlur(gray, (p.blur_kernel, p.blur_kernel), 0)
-        mark('blur')
-        edged = cv2.Canny(blurred, p.canny_low, p.canny_high)
-        mark('canny')
-        if lay.mask is None:
-            masked = edged
-        elif whole:
-            masked = cv2.bitwise_and(edged, lay.mask)
+        if whole:
+            # fixed: the lecture takes gray from the raw frame, so undistortion had no effect
+            gray = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+            mark('gray')
+            blurred = cv2.GaussianBlur(gray, (p.blur_kernel, p.blur_kernel), 0)
+            mark('blur')
+            edged = cv2.Canny(blurred, p.canny_low, p.canny_high)
+            mark('canny')
+            masked = edged if lay.mask is None else cv2.bitwise_and(edged, lay.mask)
+            mark('roi')
         else:
-            top, bottom = lay.top, lay.bottom
-            cv2.bitwise_and(edged[top - first:bottom - first], lay.mask[top:bottom],
-                            dst=lay.edges[top:bottom])
-            masked = lay.edges
-        mark('roi')
+            masked = self.band_edges(image, lay, first)
         cluttered = (self.max_edge_fraction is not None and
                      cv2.countNonZero(masked) > self.max_edge_fraction * lay.area)
         lines = np.empty((0, 4), np.int32) if cluttered else hough_lines(masked, p)
@@ -323,6 +372,30 @@ class Pipeline:
             return Detection(lines, slopes, image, cluttered=cluttered)
         return Detection(lines, slopes, make_image=lambda: lay.undistort(raw),
                          cluttered=cluttered)
+
+
+    def band_edges(self, band, lay, first):
+        """The same stages piece by piece (Layout._pieces): Hough's full-size input, the
+        mask's edges and zero elsewhere."""
+        p, mark = self.p, self.mark
+        to_gray = cv2.COLOR_BGRA2GRAY if band.shape[2] == 4 else cv2.COLOR_BGR2GRAY
+        grays = [cv2.cvtColor(band[g0 - first:g1 - first, gc0:gc1], to_gray)
+                 for _, (g0, g1, gc0, gc1), _ in lay.pieces]
+        mark('gray')
+        blurred = [cv2.GaussianBlur(gray, (p.blur_kernel, p.blur_kernel), 0) for gray in grays]
+        mark('blur')
+        edged = [cv2.Canny(b[e0 - g0:e1 - g0, ec0 - gc0:ec1 - gc0], p.canny_low, p.canny_high)
+                 for b, (_, (g0, _, gc0, _), (e0, e1, ec0, ec1)) in zip(blurred, lay.pieces,
+                                                                        strict=True)]
+        mark('canny')
+        if lay.mask is None:
+            mark('roi')
+            return edged[0]
+        for e, ((a, b, c0, c1), _, (e0, _, ec0, _)) in zip(edged, lay.pieces, strict=True):
+            cv2.bitwise_and(e[a - e0:b - e0, c0 - ec0:c1 - ec0], lay.mask[a:b, c0:c1],
+                            dst=lay.edges[a:b, c0:c1])
+        mark('roi')
+        return lay.edges
 
 
 def detect(frame, camera, p, keep_stages=False, roi=None):
