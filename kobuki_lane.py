@@ -316,8 +316,9 @@ class Pipeline:
     cv2.undistort each time; tests/test_pipeline.py holds the line): the undistortion maps are
     made once; only the part of the frame near the mask is undistorted (from a BGRA copy:
     remap is faster on 4 channels), and gray, blur and Canny run on two rectangles that hold
-    the mask's rows plus the few pixels their edges depend on (Layout._pieces). Hough still gets a full-size image, zero off the mask, so its accumulator is
-    the one the lecture's call builds. Canny's hysteresis can link weak edges from far away
+    the mask's rows plus the few pixels their edges depend on (Layout._pieces). Hough still
+    gets a full-size image, zero off the mask, so its accumulator is the one the lecture's
+    call builds. Canny's hysteresis can link weak edges from far away
     unless canny_low == canny_high (the lecture's 85, 85); otherwise, and when the stages are
     kept for pictures, the whole frame is processed.
     """
