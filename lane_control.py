@@ -11,6 +11,15 @@ y = a + b x + c x^2 (robot frame: x ahead, y left) is fitted to all of it. One l
 since the lane width is known. The fit is blended over time with a prediction from the
 commanded motion, weighted by a confidence. No lane for `lost_timeout` seconds: stop.
 
+Lane memory (`memory` seconds, 0 for none): the camera sees the floor from about 0.6 m ahead,
+so the lane between the robot and there is only known from earlier frames. The centre-line
+points of each frame are kept in the frame the robot started in, moved by dead reckoning on the
+commanded motion; they sort the next frame's segments to left and right (where the latest
+estimate, extrapolated, can be a lane off at a gap or an S-bend), and steering looks at the
+remembered centre line `memory_lookahead` ahead instead of the latest fit. With too little
+remembered there (the first frames) it steers on the latest estimate as below. The robot still
+stops after `lost_timeout` without a lane in view, memory or not.
+
 Steering looks at the fitted centre line a distance L ahead, where the segments are (a short
 piece of one line seen on a bend is not extrapolated back to the robot): its lateral position
 y_L and its slope there. The commanded path curvature is
@@ -32,7 +41,7 @@ import numpy as np
 from calibration import LECTURE_CAMERA, calibration_camera
 from floor_camera import Mounting, floor_to_row, pixels_to_floor
 from kobuki_lane import STOP, Command, Pipeline
-from settings import finite, fraction, positive, setting
+from settings import finite, fraction, non_negative, positive, setting
 
 
 @dataclass
@@ -47,7 +56,7 @@ class ImprovedParams:
     lane_width: float = setting(0.35, 'between the tape centres', 'm', positive)
     roi_near: float = setting(0.3, 'floor mask starts this far ahead (clipped to the view)', 'm',
                               positive)
-    roi_far: float = setting(2.0, 'floor mask ends this far ahead', 'm', positive)
+    roi_far: float = setting(1.2, 'floor mask ends this far ahead', 'm', positive)
     hough_rho_improved: float = setting(2.0, 'HoughLinesP rho for the improved perception',
                                         'px', positive)
     hough_threshold_improved: int = setting(30, 'HoughLinesP votes for the improved perception',
@@ -70,7 +79,7 @@ class ImprovedParams:
                            positive)
     v_min: float = setting(0.08, 'forward speed never drops below this while driving', 'm/s',
                            positive)
-    curve_slowdown: float = setting(0.8, 'speed divided by (1 + this x |curvature|)', 'm',
+    curve_slowdown: float = setting(0.4, 'speed divided by (1 + this x |curvature|)', 'm',
                                     finite)
     lookahead: float = setting(0.9, 'steer at the centre line this far ahead, or nearer where '
                                'the lane is seen nearer', 'm', positive)
@@ -79,6 +88,13 @@ class ImprovedParams:
     lateral_gain: float = setting(3.0, 'alpha: weight of the look-ahead offset against its '
                                   'direction (1 = pure pursuit)', '', positive)
     omega_max: float = setting(1.5, 'turn rate limit', 'rad/s', positive)
+    memory: float = setting(4.0, 'remember the centre line seen this long (dead reckoning on '
+                            'the commands) and steer on it; 0: steer on the latest estimate '
+                            'only', 's', non_negative)
+    memory_lookahead: float = setting(0.55, 'with memory: steer at the remembered centre line '
+                                      'this far ahead', 'm', positive)
+    memory_window: float = setting(0.25, 'with memory: fit the points this far either side of '
+                                   'the look-ahead', 'm', positive)
     dead_band: float = setting(0.05, "angular.z within this is recorded as 'straight'", 'rad/s',
                                finite)
 
@@ -96,6 +112,7 @@ class LaneEstimate:
     left: int = 0  # segments on the left line
     right: int = 0  # segments on the right line
     reach: float = 1.0  # [m] mean distance ahead of the points the fit rests on
+    points: tuple = None  # the centre-line points the fit rests on: x, y, weight (robot frame)
 
     @property
     def offset(self):  # robot left of the lane centre [m]
@@ -162,7 +179,7 @@ def fit_sides(segments, guess, half):
                              for (_, sy, _, phi), side in zip(segments, sides, strict=True)])
         a, b, c = fit_centre(cx, cy, w)
     misfit = float(np.sum(w * (cy - (a + b * cx + c * cx ** 2)) ** 2) / w.sum())
-    return (a, b, c), sides, misfit
+    return (a, b, c), sides, misfit, (cx, cy, w)
 
 
 def measure(lines, matrix, p, prior=None):
@@ -177,19 +194,19 @@ def measure(lines, matrix, p, prior=None):
     fits = [fit_sides(segments, g, half) for g in guesses]
 
     def score(i):
-        (a, _, _), _, misfit = fits[i]
+        (a, _, _), _, misfit, _ = fits[i]
         if prior is not None:  # the prediction wins unless a guess explains the lines better
             return misfit * (0.5 if i == 0 else 1.0)
         # with no history, one line fits as well on either side: take the robot in its lane
         return misfit + max(0.0, abs(a) - half) ** 2
 
     best = min(range(len(fits)), key=score)
-    (a, b, c), sides, _ = fits[best]
+    (a, b, c), sides, _, points = fits[best]
     total = sum(len(sx) * wt for sx, _, wt, _ in segments)
     left, right = int(np.sum(sides > 0)), int(np.sum(sides < 0))
     confidence = min(1.0, total / 1.0) * (1.0 if left and right else 0.7)
     reach = sum(float(np.sum(sx)) * wt for sx, _, wt, _ in segments) / total
-    return LaneEstimate(a, b, c, confidence, left, right, reach)
+    return LaneEstimate(a, b, c, confidence, left, right, reach, points)
 
 
 def fit_centre(x, y, w, ridge=0.05):
@@ -220,12 +237,86 @@ def blend(pred, meas, weight):
 def steer(est, p):
     """(linear.x, angular.z) for a lane estimate: PD at the look-ahead, see the module doc."""
     x = float(np.clip(est.reach, p.lookahead_min, p.lookahead))
-    y = est.a + est.b * x + est.c * x ** 2
-    slope = est.b + 2 * est.c * x
+    return drive(est.a + est.b * x + est.c * x ** 2, est.b + 2 * est.c * x, x, est, p)
+
+
+def drive(y, slope, x, est, p):
+    """(linear.x, angular.z) towards the centre line at y with `slope`, x metres ahead."""
     k = p.lateral_gain * 2 * y / x ** 2 + (1 - p.lateral_gain) * slope / x  # [1/m]
     v = p.v_max / (1 + p.curve_slowdown * abs(k)) * (0.5 + 0.5 * est.confidence)
     v = float(np.clip(v, p.v_min, p.v_max))
     return v, float(np.clip(v * k, -p.omega_max, p.omega_max))
+
+
+class LaneMemory:
+    """The centre-line points seen in the last `seconds`, kept in the frame the robot started
+    in (dead reckoning on the commanded motion), so that the lane is known between the robot
+    and the nearest floor the camera sees."""
+
+    def __init__(self, seconds):
+        self.seconds = seconds
+        self.pose = np.zeros(3)  # x, y, yaw of the robot in the start frame
+        self.t = 0.0
+        self.chunks = []  # (time, X, Y, weight)
+
+    def move(self, v, omega, dt):
+        x, y, yaw = self.pose
+        if abs(omega) < 1e-9:
+            x, y = x + v * dt * math.cos(yaw), y + v * dt * math.sin(yaw)
+        else:
+            r = v / omega
+            x += r * (math.sin(yaw + omega * dt) - math.sin(yaw))
+            y -= r * (math.cos(yaw + omega * dt) - math.cos(yaw))
+        self.pose = np.array([x, y, yaw + omega * dt])
+        self.t += dt
+        self.chunks = [c for c in self.chunks if self.t - c[0] <= self.seconds]
+
+    def add(self, x, y, w):
+        px, py, yaw = self.pose
+        cos, sin = math.cos(yaw), math.sin(yaw)
+        self.chunks.append((self.t, px + cos * x - sin * y, py + sin * x + cos * y, w))
+
+    def local(self):
+        """All remembered points in the robot's frame now: x, y, weight."""
+        if not self.chunks:
+            return np.empty(0), np.empty(0), np.empty(0)
+        px, py, yaw = self.pose
+        X = np.concatenate([c[1] for c in self.chunks]) - px
+        Y = np.concatenate([c[2] for c in self.chunks]) - py
+        w = np.concatenate([c[3] for c in self.chunks])
+        cos, sin = math.cos(yaw), math.sin(yaw)
+        return cos * X + sin * Y, -sin * X + cos * Y, w
+
+    def clear(self):
+        self.chunks = []
+
+    def centre_line(self, near=0.2, far=1.2):
+        """(a, b, c) of the remembered centre line between near and far metres ahead, or
+        None when too little of it is remembered there."""
+        x, y, w = self.local()
+        keep = (x > near) & (x < far)
+        if np.count_nonzero(keep) < 6 or np.ptp(x[keep]) < 0.3:
+            return None
+        return fit_centre(x[keep], y[keep], w[keep])
+
+
+def steer_memory(memory, est, p):
+    """(linear.x, angular.z) from the remembered centre line around p.memory_lookahead, or
+    None when too little of it is remembered there."""
+    x, y, w = memory.local()
+    L, half = p.memory_lookahead, p.memory_window
+    near = (x > L - half) & (x < L + half)
+    if np.count_nonzero(near) < 6 or np.ptp(x[near]) < half:
+        return None
+    x, y, w = x[near], y[near], w[near]
+    coef = fit_centre(x, y, w, ridge=0.05)
+    for _ in range(2):  # drop points sorted to the wrong line (a lane width off)
+        keep = np.abs(y - (coef[0] + coef[1] * x + coef[2] * x ** 2)) < 0.08
+        if np.count_nonzero(keep) < 6:
+            break
+        coef = fit_centre(x[keep], y[keep], w[keep], ridge=0.05)
+    a, b, c = coef
+    return drive(a + b * L + c * L ** 2, b + 2 * c * L, L, est, p)
 
 
 class ImprovedController:
@@ -248,6 +339,7 @@ class ImprovedController:
         self._matrix = None
         self._roi = {}  # mask per (camera, width, height)
         self.pipeline = Pipeline(self.detect_params, max_edge_fraction=self.p.max_edge_fraction)
+        self.memory = LaneMemory(self.p.memory) if self.p.memory > 0 else None
 
     def perceive(self, frame, camera, keep_stages=False):
         h, w = frame.shape[:2]
@@ -263,17 +355,28 @@ class ImprovedController:
         p = self.p
         self.cluttered = detection.cluttered
         prior = predict(self.estimate, *self.last, self.dt) if self.estimate else None
-        meas = measure(detection.lines, self._matrix, p, prior)
+        guide = prior  # the centre line the segments are sorted to left and right against
+        if self.memory is not None:
+            self.memory.move(*self.last, self.dt)
+            remembered = self.memory.centre_line()
+            if remembered is not None and prior is not None:
+                guide = replace(prior, a=remembered[0], b=remembered[1], c=remembered[2])
+        meas = measure(detection.lines, self._matrix, p, guide)
         if meas is not None:
             self.lost_for = 0.0
             self.estimate = blend(prior, meas, p.smoothing * meas.confidence) if prior else meas
         else:
             self.lost_for += self.dt
             self.estimate = prior
+        if self.memory is not None and meas is not None:
+            self.memory.add(*meas.points)
         if self.estimate is None or self.lost_for > p.lost_timeout:
             self.last = (0.0, 0.0)
+            if self.memory is not None:
+                self.memory.clear()
             return STOP
-        v, omega = steer(self.estimate, p)
+        steered = steer_memory(self.memory, self.estimate, p) if self.memory else None
+        v, omega = steered or steer(self.estimate, p)
         self.last = (v, omega)
         decision = ('left' if omega > p.dead_band else
                     'right' if omega < -p.dead_band else 'straight')

@@ -34,6 +34,10 @@ def finite(x):
     return math.isfinite(x)
 
 
+def non_negative(x):
+    return math.isfinite(x) and x >= 0
+
+
 def fraction(x):
     return math.isfinite(x) and 0 < x <= 1
 
