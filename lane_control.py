@@ -290,31 +290,32 @@ class LaneMemory:
     def clear(self):
         self.chunks = []
 
-    def centre_line(self, near=0.2, far=1.2):
-        """(a, b, c) of the remembered centre line between near and far metres ahead, or
-        None when too little of it is remembered there."""
+    def centre_line(self, near, far, min_span, outlier=None):
+        """(a, b, c) of the remembered centre line fitted between near and far metres ahead,
+        or None with fewer than 6 points there or spanning less than min_span. With
+        `outlier` [m], two more rounds drop the points that far off the fit (points sorted to
+        the wrong line, a lane width off)."""
         x, y, w = self.local()
         keep = (x > near) & (x < far)
-        if np.count_nonzero(keep) < 6 or np.ptp(x[keep]) < 0.3:
+        if np.count_nonzero(keep) < 6 or np.ptp(x[keep]) < min_span:
             return None
-        return fit_centre(x[keep], y[keep], w[keep])
+        x, y, w = x[keep], y[keep], w[keep]
+        coef = fit_centre(x, y, w)
+        for _ in range(2 if outlier else 0):
+            keep = np.abs(y - (coef[0] + coef[1] * x + coef[2] * x ** 2)) < outlier
+            if np.count_nonzero(keep) < 6:
+                break
+            coef = fit_centre(x[keep], y[keep], w[keep])
+        return coef
 
 
 def steer_memory(memory, est, p):
     """(linear.x, angular.z) from the remembered centre line around p.memory_lookahead, or
     None when too little of it is remembered there."""
-    x, y, w = memory.local()
     L, half = p.memory_lookahead, p.memory_window
-    near = (x > L - half) & (x < L + half)
-    if np.count_nonzero(near) < 6 or np.ptp(x[near]) < half:
+    coef = memory.centre_line(L - half, L + half, half, outlier=0.08)
+    if coef is None:
         return None
-    x, y, w = x[near], y[near], w[near]
-    coef = fit_centre(x, y, w, ridge=0.05)
-    for _ in range(2):  # drop points sorted to the wrong line (a lane width off)
-        keep = np.abs(y - (coef[0] + coef[1] * x + coef[2] * x ** 2)) < 0.08
-        if np.count_nonzero(keep) < 6:
-            break
-        coef = fit_centre(x[keep], y[keep], w[keep], ridge=0.05)
     a, b, c = coef
     return drive(a + b * L + c * L ** 2, b + 2 * c * L, L, est, p)
 
@@ -358,7 +359,7 @@ class ImprovedController:
         guide = prior  # the centre line the segments are sorted to left and right against
         if self.memory is not None:
             self.memory.move(*self.last, self.dt)
-            remembered = self.memory.centre_line()
+            remembered = self.memory.centre_line(0.2, 1.2, 0.3)
             if remembered is not None and prior is not None:
                 guide = replace(prior, a=remembered[0], b=remembered[1], c=remembered[2])
         meas = measure(detection.lines, self._matrix, p, guide)
