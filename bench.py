@@ -138,12 +138,11 @@ class Floor:
         self.lay = Layout(width, height, LECTURE_CAMERA, None, p)
         m1, m2 = self.lay.maps
         # blur and Canny: the rectangles the pipeline splits the mask's rows into, without the
-        # margins round them that make its edges right
+        # margins round them that make its edges right (with no mask: the whole frame)
         self.rects = [rows for rows, _, _ in self.lay.pieces]
         if self.lay.mask is None:
             self.top, self.bottom = 0, height
             self.maps = m1, m2
-            self.rects = [(0, height, 0, width)]
         else:
             self.top, self.bottom = self.lay.top, self.lay.bottom
             keep = np.flatnonzero(self.lay.mask.ravel() > 0)

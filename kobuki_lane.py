@@ -224,9 +224,11 @@ class Layout:
         # remap is about a third faster on 4 channels than on 3, and each channel comes out the
         # same, so the strips are undistorted from a BGRA copy of the part of the frame they
         # read (bench.py: 0.26 against 0.36 ms, the copy included)
-        self.band = np.zeros((self.last - self.first, width, 4), np.uint8)
-        self.source = self._source(width, height) if self.maps is not None else None
-        self.bgra = np.zeros((height, width, 4), np.uint8)
+        self.band = self.source = self.bgra = None
+        if self.maps is not None:
+            self.band = np.zeros((self.last - self.first, width, 4), np.uint8)
+            self.source = self._source(width, height)
+            self.bgra = np.zeros((height, width, 4), np.uint8)
         self.edges = np.zeros((height, width), np.uint8)  # Hough's input; zero off the band
 
     def _strips(self, width, height):
@@ -343,7 +345,6 @@ class Pipeline:
         height, width = raw.shape[:2]
         lay = self.layout(width, height, camera, roi)
         whole = keep_stages or p.canny_low != p.canny_high or lay.top == lay.bottom
-        first = 0 if whole else lay.first
         image = lay.undistort(raw) if whole else lay.undistort_band(raw)
         mark('undistort')
         if whole:
@@ -357,7 +358,7 @@ class Pipeline:
             masked = edged if lay.mask is None else cv2.bitwise_and(edged, lay.mask)
             mark('roi')
         else:
-            masked = self.band_edges(image, lay, first)
+            masked = self.band_edges(image, lay)
         cluttered = (self.max_edge_fraction is not None and
                      cv2.countNonZero(masked) > self.max_edge_fraction * lay.area)
         lines = np.empty((0, 4), np.int32) if cluttered else hough_lines(masked, p)
@@ -374,11 +375,10 @@ class Pipeline:
         return Detection(lines, slopes, make_image=lambda: lay.undistort(raw),
                          cluttered=cluttered)
 
-
-    def band_edges(self, band, lay, first):
-        """The same stages piece by piece (Layout._pieces): Hough's full-size input, the
-        mask's edges and zero elsewhere."""
-        p, mark = self.p, self.mark
+    def band_edges(self, band, lay):
+        """The same stages piece by piece (Layout._pieces) on rows lay.first:lay.last:
+        Hough's full-size input, the mask's edges and zero elsewhere."""
+        p, mark, first = self.p, self.mark, lay.first
         to_gray = cv2.COLOR_BGRA2GRAY if band.shape[2] == 4 else cv2.COLOR_BGR2GRAY
         grays = [cv2.cvtColor(band[g0 - first:g1 - first, gc0:gc1], to_gray)
                  for _, (g0, g1, gc0, gc1), _ in lay.pieces]
