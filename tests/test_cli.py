@@ -288,6 +288,16 @@ def test_controller_and_its_gains_from_private_params(tmp_path):
     assert proc.returncode == 2 and 'controller must be lecture or improved' in proc.stderr
 
 
+def test_lane_memory_can_be_turned_off_but_not_made_negative(tmp_path):
+    out = tmp_path / 'd.jsonl'
+    assert main(['--source', SAMPLES, '--dry-run', '--controller', 'improved', '--memory', '0',
+                 '--decisions', str(out), '--quiet']) == 0
+    assert len(read_jsonl(out)) == len(os.listdir(SAMPLES))
+    proc = cli('--source', SAMPLES, '--dry-run', '--controller', 'improved', '--memory', '-1')
+    assert proc.returncode == 2 and 'memory = -1.0 is out of range' in proc.stderr
+    assert 'Traceback' not in proc.stderr
+
+
 def test_a_folder_of_nothing_readable_is_an_error_not_an_empty_run(tmp_path):
     (tmp_path / 'a.jpg').write_bytes(b'not a jpeg')
     (tmp_path / 'b.png').write_bytes(b'\x89PNG\r\n')
