@@ -1,10 +1,10 @@
 #!/usr/bin/env python3
-"""Camera calibration for kobuki_lane: the lecture's camera, or one from a ROS camera_info YAML.
+"""Camera calibration for kobuki_lane: show a calibration, or make one from chessboard pictures.
 
 The lecture's `calibration_camera(seeimg)` undistorts every frame with one fixed camera
-matrix and five distortion coefficients (plumb_bob: k1, k2, p1, p2, k3). Those exact numbers
-live here as LECTURE_CAMERA. Any other camera is loaded from the YAML layout that ROS's
-`camera_calibration` writes (image_width, image_height, camera_matrix, distortion_coefficients).
+matrix and five distortion coefficients (lanelib/camera.py: LECTURE_CAMERA, digit for digit).
+Another camera needs its own: this tool makes it, in the YAML layout that ROS's
+`camera_calibration` writes, which kobuki_lane.py --calibration camera.yaml loads.
 
 usage:
     python calibration.py --show lecture          print a calibration and what it implies
@@ -14,12 +14,7 @@ usage:
 
 --pattern is the chessboard's inner corners (columns x rows), --square the side of one square
 in metres. The tool finds the corners (sub-pixel), calibrates (plumb_bob), prints the RMS
-reprojection error and the pictures it could not use, and writes the camera_info YAML layout
-ROS's camera_calibration writes, which kobuki_lane.py --calibration camera.yaml loads.
-
-In code:
-    camera = load_calibration('lecture')       # or 'none', or a path to a YAML file
-    undistorted = calibration_camera(frame, camera)
+reprojection error and the pictures it could not use, and writes the camera_info YAML.
 """
 
 import argparse
@@ -30,140 +25,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from settings import output_problem
-
-
-class CalibrationError(ValueError):
-    """A calibration file that cannot be used; the message names the file and the field."""
-
-
-@dataclass(frozen=True)
-class Camera:
-    """Pinhole camera with plumb_bob distortion, valid at image_size (width, height) in pixels."""
-
-    name: str
-    matrix: np.ndarray  # 3x3 camera matrix K [px]
-    distortion: np.ndarray  # (k1, k2, p1, p2, k3)
-    image_size: tuple  # (width, height) [px] the matrix was calibrated at
-
-    def scaled_to(self, width, height):
-        """The same camera read out at another resolution (K scales with the image)."""
-        if (width, height) == tuple(self.image_size):
-            return self
-        sx, sy = width / self.image_size[0], height / self.image_size[1]
-        k = self.matrix.copy()
-        k[0, :] *= sx
-        k[1, :] *= sy
-        return Camera(self.name, k, self.distortion, (width, height))
-
-
-# The lecture's slide "calibration_camera" (Refer Slide Time 18:57), digit for digit.
-# The slides give no image size; cx ~ 310 and cy ~ 196 fit a 640x480 webcam.
-LECTURE_CAMERA = Camera(
-    name='lecture',
-    matrix=np.array([[893.45537548, 0.0, 309.61828309],
-                     [0.0, 866.99738285, 196.40832355],
-                     [0.0, 0.0, 1.0]]),
-    distortion=np.array([2.28504143e-01, -7.32838958e+00, -2.43747623e-02,
-                         9.12080996e-03, 3.98425001e+01]),
-    image_size=(640, 480),
-)
-
-
-def calibration_camera(seeimg, camera):
-    """Undistort one frame (the lecture's function; camera None means no calibration)."""
-    if camera is None:
-        return seeimg
-    h, w = seeimg.shape[:2]
-    cam = camera.scaled_to(w, h)
-    # same call as the slide: the new camera matrix is the old one
-    return cv2.undistort(seeimg, cam.matrix, cam.distortion, None, cam.matrix)
-
-
-def undistortion_maps(camera, width, height):
-    """The maps cv2.undistort builds on every call, built once for cv2.remap.
-
-    They are the CV_16SC2 fixed-point maps cv2.undistort uses inside, so
-    cv2.remap(frame, *maps, cv2.INTER_LINEAR) gives exactly calibration_camera(frame, camera).
-    """
-    cam = camera.scaled_to(width, height)
-    return cv2.initUndistortRectifyMap(cam.matrix, cam.distortion, None, cam.matrix,
-                                       (width, height), cv2.CV_16SC2)
-
-
-def load_calibration(spec):
-    """'lecture' -> LECTURE_CAMERA, 'none' -> None, anything else -> a camera_info YAML path."""
-    if spec == 'lecture':
-        return LECTURE_CAMERA
-    if spec == 'none':
-        return None
-    return read_camera_info(spec)
-
-
-def _matrix(doc, field, rows, cols, path):
-    block = doc.get(field)
-    if not isinstance(block, dict) or 'data' not in block:
-        raise CalibrationError(f"{path}: field '{field}' is missing or has no 'data' list")
-    data = block['data']
-    try:
-        values = np.array(data, dtype=float).ravel()
-    except (TypeError, ValueError):
-        raise CalibrationError(f"{path}: field '{field}.data' must be a list of numbers") from None
-    if cols is None:  # distortion: any length OpenCV accepts
-        if values.size not in (4, 5, 8, 12, 14):
-            raise CalibrationError(f"{path}: field '{field}.data' has {values.size} values; "
-                                   "expected 4, 5, 8, 12 or 14")
-        return values
-    if values.size != rows * cols:
-        raise CalibrationError(f"{path}: field '{field}.data' has {values.size} values; "
-                               f"expected {rows * cols} ({rows}x{cols})")
-    if not np.all(np.isfinite(values)):
-        raise CalibrationError(f"{path}: field '{field}.data' has a value that is not finite")
-    return values.reshape(rows, cols)
-
-
-def read_camera_info(path):
-    """Read the YAML that ROS's camera_calibration writes; errors name the field at fault."""
-    import yaml  # Debian's python3-yaml, which rospy itself needs
-
-    try:
-        with open(path, encoding='utf-8') as f:
-            doc = yaml.safe_load(f)
-    except FileNotFoundError:
-        raise CalibrationError(f"{path}: no such calibration file "
-                               "(use --calibration lecture, none, or a camera_info YAML)") from None
-    except (OSError, yaml.YAMLError) as e:
-        raise CalibrationError(f"{path}: cannot read as YAML: {e}") from None
-    if not isinstance(doc, dict):
-        raise CalibrationError(f"{path}: not a camera_info YAML mapping")
-    size = []
-    for field in ('image_width', 'image_height'):
-        value = doc.get(field)
-        if not isinstance(value, int) or value <= 0:
-            raise CalibrationError(f"{path}: field '{field}' must be a positive integer")
-        size.append(value)
-    k = _matrix(doc, 'camera_matrix', 3, 3, path)
-    if k[0, 0] <= 0 or k[1, 1] <= 0:
-        raise CalibrationError(f"{path}: field 'camera_matrix' needs positive fx and fy")
-    model = doc.get('distortion_model', 'plumb_bob')
-    if model not in ('plumb_bob', 'rational_polynomial'):
-        raise CalibrationError(f"{path}: field 'distortion_model' is '{model}'; "
-                               "only plumb_bob and rational_polynomial are supported")
-    dist = _matrix(doc, 'distortion_coefficients', 1, None, path)
-    return Camera(str(doc.get('camera_name', path)), k, dist, tuple(size))
-
-
-def describe(camera):
-    """Human-readable summary: focal lengths, principal point, field of view."""
-    if camera is None:
-        return 'no calibration: frames are used as they come'
-    k = camera.matrix
-    w, h = camera.image_size
-    fov_x = math.degrees(2 * math.atan(w / (2 * k[0, 0])))
-    fov_y = math.degrees(2 * math.atan(h / (2 * k[1, 1])))
-    return (f"camera '{camera.name}' at {w}x{h}: fx={k[0, 0]:.2f} fy={k[1, 1]:.2f} "
-            f"cx={k[0, 2]:.2f} cy={k[1, 2]:.2f} px, field of view {fov_x:.1f} x {fov_y:.1f} deg, "
-            f"distortion {np.array2string(camera.distortion, precision=4)}")
+from lanelib.camera import CalibrationError, Camera, camera_info_yaml, describe, load_calibration
+from lanelib.settings import output_problem
 
 
 def find_corners(gray, pattern):
@@ -211,23 +74,6 @@ def calibrate(paths, pattern, square, name='camera'):
                                '(10 to 20 at different angles and distances is better)')
     rms, k, dist, _, _ = cv2.calibrateCamera(object_points, image_points, size, None, None)
     return CalibrationResult(Camera(name, k, dist.ravel()[:5], size), float(rms), used, unusable)
-
-
-def camera_info_yaml(camera):
-    """The YAML camera_calibration writes (the rectification is the identity for a monocular
-    camera, and the projection is K with a zero fourth column)."""
-    def block(rows, cols, values):
-        data = ', '.join(f'{v:.10g}' for v in np.asarray(values, float).ravel())
-        return f'  rows: {rows}\n  cols: {cols}\n  data: [{data}]\n'
-
-    k = camera.matrix
-    projection = np.hstack([k, np.zeros((3, 1))])
-    return (f'image_width: {camera.image_size[0]}\nimage_height: {camera.image_size[1]}\n'
-            f'camera_name: {camera.name}\ncamera_matrix:\n{block(3, 3, k)}'
-            f'distortion_model: plumb_bob\n'
-            f'distortion_coefficients:\n{block(1, len(camera.distortion), camera.distortion)}'
-            f'rectification_matrix:\n{block(3, 3, np.eye(3))}'
-            f'projection_matrix:\n{block(3, 4, projection)}')
 
 
 def pattern_size(text):

@@ -27,273 +27,50 @@ import argparse
 import json
 import math
 import sys
-from dataclasses import dataclass
 
 import cv2
-import numpy as np
 
-from calibration import LECTURE_CAMERA
-from floor_camera import FloorCamera, FloorMap, Track
-from kobuki_lane import LaneFollower, LaneParams, LectureRule, VideoSink
-from lane_control import ImprovedController, ImprovedParams
-from rospy_standin import SimClock, StandInRospy, Twist
-from settings import output_problem
-from tracks import BUILTIN, TrackError, load_track
+from kobuki_lane import LaneFollower, LaneParams, make_controller
+from lanelib.camera import LECTURE_CAMERA
+from lanelib.cli import check_output, fail
+from lanelib.outputs import Outputs
+from lanelib.rospy_standin import SimClock, StandInRospy, Twist
+from lanelib.safety import SafeBase
+from lanelib.sim.base import BaseLimits
+from lanelib.sim.simulator import (
+    VARIANTS,
+    SideBySide,
+    TopDown,
+    TrackSimulator,
+    apply_variant,
+    improved_params,
+)
+from lanelib.sim.tracks import BUILTIN, TrackError, load_track
 
-STALL_TIME = 30.0  # [s] without 5 cm of progress ends a run
-
-
-@dataclass
-class BaseLimits:
-    v_max: float = 0.7  # [m/s] Kobuki's top speed
-    omega_max: float = math.pi  # [rad/s] Kobuki's top turn rate
-    accel: float = 0.0  # [m/s^2] linear acceleration limit, 0 for none
-    alpha: float = 0.0  # [rad/s^2] angular acceleration limit, 0 for none
-    timeout: float = 0.6  # [s] kobuki driver: no command for this long and the base stops
-    latency: float = 0.05  # [s] from publish to the wheels
-
-
-def _approach(value, target, rate_limit, dt):
-    if rate_limit <= 0:
-        return target
-    step = rate_limit * dt
-    return value + float(np.clip(target - value, -step, step))
-
-
-class DiffDriveBase:
-    """A differential-drive base integrated exactly along arcs in `dt` steps."""
-
-    def __init__(self, pose, limits=None, dt=0.01, t0=0.0):
-        self.x, self.y, self.yaw = pose
-        self.limits = limits or BaseLimits()
-        self.dt = dt
-        self.t = t0
-        self.v = self.omega = 0.0
-        self.distance = 0.0
-        self._pending = []  # (time it reaches the wheels, v, omega)
-        self._cmd = (0.0, 0.0)
-        self._cmd_time = -math.inf
-
-    @property
-    def pose(self):
-        return (self.x, self.y, self.yaw)
-
-    def command(self, t, v, omega):
-        """A Twist published at time t."""
-        self._pending.append((t + self.limits.latency, float(v), float(omega)))
-
-    def advance(self, t_end):
-        """Drive until t_end."""
-        lim = self.limits
-        while self.t < t_end - 1e-12:
-            dt = min(self.dt, t_end - self.t)
-            while self._pending and self._pending[0][0] <= self.t + 1e-12:
-                self._cmd_time, *cmd = self._pending.pop(0)
-                self._cmd = tuple(cmd)
-            v_cmd, w_cmd = self._cmd if self.t - self._cmd_time <= lim.timeout else (0.0, 0.0)
-            v_cmd = float(np.clip(v_cmd, -lim.v_max, lim.v_max))
-            w_cmd = float(np.clip(w_cmd, -lim.omega_max, lim.omega_max))
-            self.v = _approach(self.v, v_cmd, lim.accel, dt)
-            self.omega = _approach(self.omega, w_cmd, lim.alpha, dt)
-            self._move(self.v, self.omega, dt)
-            self.t += dt
-
-    def _move(self, v, omega, dt):
-        if abs(omega) < 1e-9:
-            self.x += v * dt * math.cos(self.yaw)
-            self.y += v * dt * math.sin(self.yaw)
-        else:
-            r, yaw2 = v / omega, self.yaw + omega * dt
-            self.x += r * (math.sin(yaw2) - math.sin(self.yaw))
-            self.y -= r * (math.cos(yaw2) - math.cos(self.yaw))
-            self.yaw = yaw2
-        self.distance += abs(v) * dt
-
-
-class TrackSimulator:
-    """A frame source that is a robot on a track; it hears the node's Twists via `ros`."""
-
-    live = False
-    skipped = 0
-    total = None
-
-    def __init__(self, spec, ros, seed=0, time_limit=None, keep_going=False, start_offset=0.0,
-                 start_yaw=0.0, limits=None):
-        self.spec, self.ros = spec, ros
-        track = spec.track
-        # open tracks go on straight beyond the finish so the camera still sees tape there
-        shown = track if spec.closed else Track(track.lane_width, track.tape_width,
-                                                 track.segments + [{'straight': 3.5}])
-        self.floor_map = FloorMap(shown, spec.gaps, spec.dashes)
-        self.camera = FloorCamera(LECTURE_CAMERA, spec.mounting)
-        ros.listeners.append(lambda t, topic, msg: self.base.command(t, msg.linear.x,
-                                                                    msg.angular.z))
-        self.rng = np.random.default_rng(seed)
-        self.seed = seed
-        self.keep_going = keep_going
-        self._start = (start_offset, start_yaw, limits, time_limit)
-        self.frames = 0
-        self.restart(0.0)
-
-    def restart(self, t0):
-        """Put the robot back at the start at time t0, for a new run on the same track."""
-        offset, yaw, limits, time_limit = self._start
-        track = self.spec.track
-        self.base = DiffDriveBase(track.pose_at(0.0, offset, yaw), limits, t0=t0)
-        self.time_limit = t0 + (time_limit or (track.length / 0.04 + 30.0))
-        self.history = []  # (t, x, y, s, offset)
-        self.departure_points = []
-        self.ended = None
-        self._idx = 0
-        self._departed = False
-        self._best = (0.0, t0)  # (progress s, time reached)
-
-    def where(self):
-        """Arc length along the centre line and signed offset (+ left) of the robot."""
-        c = self.spec.track.centre
-        lo, hi = max(0, self._idx - 60), min(len(c), self._idx + 400)
-        d = np.hypot(c[lo:hi, 0] - self.base.x, c[lo:hi, 1] - self.base.y)
-        self._idx = lo + int(np.argmin(d))
-        cx, cy, heading, s = c[self._idx]
-        offset = -(self.base.x - cx) * math.sin(heading) + (self.base.y - cy) * math.cos(heading)
-        return s, offset
-
-    def _check(self, t):
-        s, offset = self.where()
-        self.history.append((t, self.base.x, self.base.y, s, offset))
-        out = abs(offset) > self.spec.track.lane_width / 2
-        if out and not self._departed:
-            self.departure_points.append((self.base.x, self.base.y))
-        self._departed = out
-        if s > self._best[0] + 0.05:
-            self._best = (s, t)
-        if s >= self.spec.track.length - 0.02:
-            return 'completed'
-        if out and not self.keep_going:
-            return 'departure'
-        if t >= self.time_limit:
-            return 'time limit'
-        if t - self._best[1] > STALL_TIME:
-            return 'stalled'
-        return None
-
-    def read(self):
-        t = self.ros.clock.now()
-        self.base.advance(t)
-        self.ended = self.ended or self._check(t)
-        if self.ended:
-            return False, None, None
-        frame = self.camera.render(self.floor_map, self.base.pose, self.spec.scene, self.rng)
-        self.frames += 1
-        return True, frame, self.frames - 1
-
-    def release(self):
-        pass
-
-    def metrics(self, controller):
-        h = np.array(self.history) if self.history else np.zeros((1, 5))
-        t = float(h[-1, 0])
-        length = self.spec.track.length
-        offsets = h[:, 4]
-        return dict(track=self.spec.name, controller=controller,
-                    completed=self.ended == 'completed',
-                    progress=round(min(1.0, float(h[:, 3].max()) / length), 4),
-                    distance_m=round(self.base.distance, 3), time_s=round(t, 2),
-                    mean_speed_mps=round(self.base.distance / t, 4) if t > 0 else 0.0,
-                    rms_offset_m=round(float(np.sqrt(np.mean(offsets ** 2))), 4),
-                    max_offset_m=round(float(np.abs(offsets).max()), 4),
-                    departures=len(self.departure_points), ended=self.ended,
-                    frames=self.frames, seed=self.seed, track_length_m=round(length, 3))
-
-
-# ---------------------------------------------------------------- pictures
-
-class TopDown:
-    """The track from above, in pixels; the driven path coloured by offset."""
-
-    def __init__(self, sim, size=480):
-        self.sim = sim
-        left, right = sim.spec.track.tape_lines()
-        pts = np.vstack([left, right])
-        lo, hi = pts.min(axis=0) - 0.4, pts.max(axis=0) + 0.4
-        self.scale = size / float(max(hi - lo))
-        self.lo = lo
-        self.shape = (int((hi[1] - lo[1]) * self.scale) + 1, int((hi[0] - lo[0]) * self.scale) + 1)
-        self.background = np.full(self.shape + (3,), 40, np.uint8)
-        for line in (left, right):
-            cv2.polylines(self.background, [self.px(line)], False, (200, 200, 200), 2,
-                          cv2.LINE_AA)
-
-    def px(self, xy):
-        xy = np.asarray(xy, float).reshape(-1, 2)
-        u = (xy[:, 0] - self.lo[0]) * self.scale
-        v = self.shape[0] - 1 - (xy[:, 1] - self.lo[1]) * self.scale
-        return np.stack([u, v], axis=1).round().astype(np.int32).reshape(-1, 1, 2)
-
-    def draw(self, title=None):
-        img = self.background.copy()
-        h = np.array(self.sim.history) if self.sim.history else None
-        half = self.sim.spec.track.lane_width / 2
-        if h is not None and len(h) > 1:
-            pts = self.px(h[:, 1:3])
-            level = np.clip(np.abs(h[:, 4]) / half * 255, 0, 255).astype(np.uint8)
-            colours = cv2.applyColorMap(level.reshape(-1, 1), cv2.COLORMAP_JET).reshape(-1, 3)
-            for i in range(len(pts) - 1):
-                cv2.line(img, tuple(pts[i, 0]), tuple(pts[i + 1, 0]),
-                         tuple(int(c) for c in colours[i]), 2, cv2.LINE_AA)
-        for x, y in self.sim.departure_points:
-            u, v = self.px([x, y])[0, 0]
-            cv2.drawMarker(img, (int(u), int(v)), (0, 0, 255), cv2.MARKER_TILTED_CROSS, 14, 2)
-        base = self.sim.base
-        nose = [base.x + 0.15 * math.cos(base.yaw), base.y + 0.15 * math.sin(base.yaw)]
-        cv2.arrowedLine(img, tuple(self.px([base.x, base.y])[0, 0]), tuple(self.px(nose)[0, 0]),
-                        (255, 255, 255), 2, tipLength=0.4)
-        if title:
-            for i, text in enumerate(title.split('\n')):
-                cv2.putText(img, text, (6, 16 + 16 * i), cv2.FONT_HERSHEY_SIMPLEX, 0.42,
-                            (255, 255, 255), 1, cv2.LINE_AA)
-        cv2.putText(img, 'path colour: |offset| 0 (blue) .. half a lane (red); x: departure',
-                    (6, img.shape[0] - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.36, (220, 220, 220), 1,
-                    cv2.LINE_AA)
-        return img
-
-
-class SideBySide(VideoSink):
-    """Annotated onboard view beside the top-down view, for --video."""
-
-    def __init__(self, path, fps, topdown):
-        super().__init__(path, fps)
-        self.topdown = topdown
-
-    def write(self, image):
-        top = self.topdown.draw()
-        h = image.shape[0]
-        top = cv2.resize(top, (int(top.shape[1] * h / top.shape[0]), h))
-        super().write(np.hstack([image, top]))
+PROG = 'simulate.py'
 
 
 # ---------------------------------------------------------------- runs
 
-def make_controller(name, spec, params):
-    if name == 'lecture':
-        return LectureRule(params)
-    m = spec.mounting
-    return ImprovedController(params, ImprovedParams(
-        camera_height=m.height, camera_pitch=m.pitch_deg, camera_forward=m.forward,
-        lane_width=spec.track.lane_width))
+def controller_for(name, spec, params):
+    """kobuki_lane's controller; the improved one is told the track's mounting and lane."""
+    return make_controller(name, params, LECTURE_CAMERA,
+                           improved_params(spec) if name == 'improved' else None)
 
 
 def run(spec, controller='lecture', seed=0, video=None, plot=None, time_limit=None,
-        keep_going=False, start_offset=0.0, start_yaw=0.0, limits=None):
-    """One closed-loop run; returns the metrics dict."""
+        keep_going=False, start_offset=0.0, start_yaw=0.0, limits=None,
+        controller_factory=controller_for):
+    """One closed-loop run; returns the metrics dict. controller_factory(name, spec,
+    params): the controller to drive with (controller_for: kobuki_lane's, told the track)."""
     ros = StandInRospy(SimClock(), quiet=True)
     sim = TrackSimulator(spec, ros, seed, time_limit, keep_going, start_offset, start_yaw,
                          limits)
     params = LaneParams()
     topdown = TopDown(sim) if (video or plot) else None
     sink = SideBySide(video, params.rate, topdown) if video else None
-    follower = LaneFollower(ros, Twist, sim, params, LECTURE_CAMERA,
-                            controller=make_controller(controller, spec, params), video=sink)
+    follower = LaneFollower(ros, sim, controller_factory(controller, spec, params),
+                            SafeBase(ros, Twist), Outputs(params, video=sink), params.rate)
     try:
         follower.run()
     finally:
@@ -312,29 +89,6 @@ def run(spec, controller='lecture', seed=0, video=None, plot=None, time_limit=No
 
 
 # ---------------------------------------------------------------- command line
-
-VARIANTS = {  # the robustness conditions of the benchmark
-    'clean': {},
-    'noise 10': dict(noise=10.0),
-    'lighting gradient': dict(gradient=80.0),
-    'gap 20 cm': dict(gap=0.2),
-}
-
-
-def apply_variant(spec, variant):
-    """The track with a benchmark condition: noise, a lighting gradient, or a gap."""
-    cond = VARIANTS[variant]
-    if 'noise' in cond:
-        spec.scene.noise = cond['noise']
-    if 'gradient' in cond:
-        spec.scene.gradient = cond['gradient']
-    if 'gap' in cond:
-        # 40 % of the way along every built-in track is in a left bend, where the right (outer)
-        # tape is the only one in view: the gap takes away all the camera sees
-        spec.gaps = spec.gaps + [dict(line='right', at=0.4 * spec.track.length,
-                                      length=cond['gap'])]
-    return spec
-
 
 def _bench_job(job):
     track, controller, variant, seed = job
@@ -426,16 +180,10 @@ def build_parser():
     return parser
 
 
-def fail(message):
-    print(f'simulate.py: error: {message}', file=sys.stderr)
-    raise SystemExit(2)
-
-
 def check_outputs(args):
-    for path in (args.json, args.plot, args.video):
-        problem = path and output_problem(path)
-        if problem:
-            fail(f"cannot write '{path}': {problem}")
+    for path, what in ((args.json, '--json'), (args.plot, '--plot'), (args.video, '--video')):
+        if path:
+            check_output(PROG, path, what)
 
 
 def customise(spec, args):
@@ -444,12 +192,12 @@ def customise(spec, args):
             setattr(spec.scene, key, getattr(args, key))
     for gap in args.gap:
         if gap['line'] not in ('left', 'right', 'both') or gap['length'] <= 0:
-            fail(f'--gap {gap}: line must be left, right or both, length positive')
+            fail(PROG, f'--gap {gap}: line must be left, right or both, length positive')
     spec.gaps = spec.gaps + args.gap
     if args.dashes:
         d = args.dashes
         if d['line'] not in ('left', 'right', 'both') or d['on'] <= 0 or d['off'] <= 0:
-            fail(f'--dashes {d}: line must be left, right or both, on and off positive')
+            fail(PROG, f'--dashes {d}: line must be left, right or both, on and off positive')
         spec.dashes = d
     if args.camera_height is not None:
         spec.mounting.height = args.camera_height
@@ -476,7 +224,7 @@ def main(argv=None):
     try:
         spec = customise(load_track(args.track), args)
     except TrackError as e:
-        fail(str(e))
+        fail(PROG, str(e))
     limits = BaseLimits(accel=args.accel, alpha=args.accel * 4, latency=args.latency)
     result = run(spec, args.controller, args.seed, args.video, args.plot, args.time_limit,
                  args.keep_going, args.start_offset, math.radians(args.start_yaw), limits)

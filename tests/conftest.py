@@ -1,17 +1,38 @@
-"""Shared fixtures: a real roscore (Debian's ros-core) and small frame folders."""
+"""Fixtures: a real roscore (Debian's ros-core) and small frame folders. Helpers shared by the
+test modules are in helpers.py."""
 
 import os
 import shutil
-import sys
-import threading
+import signal
 import time
 
 import pytest
+from helpers import SAMPLES, TwistRecorder
 
-from roslive import free_port, node_env, start_master, stop_master
+from tools.roslive import free_port, node_env, ros_processes, start_master, stop_master
 
-REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-SAMPLES = os.path.join(REPO, 'samples', 'track')
+
+@pytest.fixture(scope='session', autouse=True)
+def no_ros_process_left():
+    """After the whole suite, no ROS process that it started may still run: a roscore,
+    rosmaster, rosout, roslaunch, node or subscriber left behind is killed, and the suite
+    fails. (Set up first, so torn down last, after the session's own roscore has stopped.)"""
+    before = set(ros_processes())
+    yield
+    deadline = time.monotonic() + 10  # a stopped roscore takes a moment to end its children
+    while True:
+        left = {pid: cmd for pid, cmd in ros_processes().items() if pid not in before}
+        if not left or time.monotonic() > deadline:
+            break
+        time.sleep(0.2)
+    for pid in left:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    if left:
+        pytest.fail('the tests left ROS processes running (now killed): ' +
+                    '; '.join(f'{pid} {cmd}' for pid, cmd in sorted(left.items())))
 
 
 @pytest.fixture(scope='session')
@@ -37,34 +58,6 @@ def roscore(tmp_path_factory):
     stop_master(proc)
 
 
-class TwistRecorder:
-    """A real rospy subscriber on the velocity topic, keeping (receive time, x, z)."""
-
-    def __init__(self, topic='/mobile_base/commands/velocity'):
-        import rospy
-        from geometry_msgs.msg import Twist
-
-        self.messages = []
-        self._lock = threading.Lock()
-        self._sub = rospy.Subscriber(topic, Twist, self._callback, queue_size=100)
-
-    def _callback(self, msg):
-        with self._lock:
-            self.messages.append((time.monotonic(), msg.linear.x, msg.angular.z))
-
-    def wait_for(self, count, timeout):
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            with self._lock:
-                if len(self.messages) >= count:
-                    break
-            time.sleep(0.05)
-        return list(self.messages)
-
-    def close(self):
-        self._sub.unregister()
-
-
 @pytest.fixture
 def twist_recorder(roscore):
     rec = TwistRecorder()
@@ -81,37 +74,3 @@ def few_frames(tmp_path):
     for name in names[::3][:8]:
         shutil.copy(os.path.join(SAMPLES, name), folder / name)
     return folder
-
-
-def run_as_nobody(main, argv):
-    """main(argv) in a forked child that, if we are root, becomes 'nobody' first
-    (root may write anywhere; on a robot the node is not root). Returns (status, output).
-    The child runs the already imported code, so it needs no access to this checkout."""
-    import pwd
-
-    nobody = pwd.getpwnam('nobody')
-    r, w = os.pipe()
-    pid = os.fork()
-    if pid == 0:  # the child: never returns into pytest
-        code = 99
-        try:
-            os.dup2(w, 1)
-            os.dup2(w, 2)
-            # pytest has replaced sys.stdout and sys.stderr; write to the pipe instead
-            sys.stdout = sys.stderr = open(1, 'w', closefd=False)
-            if os.geteuid() == 0:
-                os.setgroups([])
-                os.setgid(nobody.pw_gid)
-                os.setuid(nobody.pw_uid)
-            try:
-                code = main(argv) or 0
-            except SystemExit as e:
-                code = e.code if isinstance(e.code, int) else 1
-        finally:
-            sys.stdout.flush()
-            os._exit(code)
-    os.close(w)
-    with os.fdopen(r) as f:
-        output = f.read()
-    _, status = os.waitpid(pid, 0)
-    return os.waitstatus_to_exitcode(status), output

@@ -5,18 +5,16 @@ import os
 import signal
 import subprocess
 import sys
-import time
 
 import cv2
 import numpy as np
 import pytest
-from conftest import REPO, SAMPLES
+from helpers import NODE, REPO, SAMPLES, wait_until
 
-from bags import BagSource
-from frames import SourceError, open_source
 from kobuki_lane import main
+from lanelib.bags import BagSource
+from lanelib.sources import SourceError, open_source
 
-NODE = os.path.join(REPO, 'kobuki_lane.py')
 TOPIC = '/mobile_base/commands/velocity'
 
 
@@ -71,7 +69,7 @@ def test_a_bag_from_real_rosbag_plays_as_frames(tmp_path, encoding):
         got.append(frame)
     source.release()
     assert len(got) == len(frames)
-    for ours, theirs in zip(got, frames, strict=True):
+    for ours, theirs in zip(got, frames):
         if encoding == 'mono8':
             assert np.array_equal(ours, cv2.cvtColor(theirs, cv2.COLOR_BGR2GRAY))
         elif encoding == 'jpeg':
@@ -156,11 +154,12 @@ def test_an_existing_bag_is_not_overwritten(tmp_path):
 
 
 def test_ctrl_c_leaves_a_bag_that_opens(tmp_path):
-    out = tmp_path / 'out.bag'
+    out, decisions = tmp_path / 'out.bag', tmp_path / 'd.jsonl'
     proc = subprocess.Popen([sys.executable, NODE, '--source', SAMPLES, '--dry-run', '--realtime',
-                             '--bag', str(out), '--quiet'], cwd=REPO, stderr=subprocess.PIPE,
-                            text=True)
-    time.sleep(2.5)
+                             '--bag', str(out), '--decisions', str(decisions), '--quiet'],
+                            cwd=REPO, stderr=subprocess.PIPE, text=True)
+    wait_until(lambda: decisions.exists() and len(decisions.read_text().splitlines()) >= 3, 30,
+               'three frames decided')
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 130, err

@@ -3,10 +3,12 @@
 import cv2
 import numpy as np
 import pytest
-from conftest import SAMPLES
+from helpers import SAMPLES
 
-from calibration import LECTURE_CAMERA, CalibrationError, calibration_camera, load_calibration, main
+from calibration import main
+from kobuki_lane import calibration_camera
 from kobuki_lane import main as node_main
+from lanelib.camera import LECTURE_CAMERA, CalibrationError, load_calibration
 
 # the layout ROS's camera_calibration writes (ost.yaml)
 ROS_YAML = """image_width: 640

@@ -1,6 +1,5 @@
 """kobuki_lane.py from the command line: dry runs, sources, outputs, bad input."""
 
-import json
 import os
 import shutil
 import signal
@@ -11,19 +10,13 @@ import time
 import cv2
 import numpy as np
 import pytest
-from conftest import REPO, SAMPLES, run_as_nobody
+from helpers import NODE, REPO, SAMPLES, read_jsonl, run_as_nobody
 
 import kobuki_lane
-from calibration import LECTURE_CAMERA
 from kobuki_lane import LaneParams, LectureRule, detect, main
+from lanelib.camera import LECTURE_CAMERA
 
-NODE = os.path.join(REPO, 'kobuki_lane.py')
 KEYS = ('frame', 'source', 'lines', 'theta', 'value', 'decision', 'linear_x', 'angular_z')
-
-
-def read_jsonl(path):
-    with open(path, encoding='utf-8') as f:
-        return [json.loads(line) for line in f]
 
 
 def cli(*args, timeout=60, env=None):
@@ -179,11 +172,9 @@ def test_outputs_in_a_read_only_folder_are_refused_before_the_run(flag):
 
 def tool_mains(labels_folder):
     """(name, main, argv before the output path) of every command line that writes a file."""
-    import bench
     import calibration
-    import evaluate_real
     import simulate
-    import soak
+    from tools import bench, evaluate_real, soak
 
     return [('bench.py', bench.main, ['--quick', '--json']),
             ('soak.py', soak.main, ['--json']),

@@ -6,8 +6,9 @@ import json
 import cv2
 import pytest
 
-import evaluate_real
-from floor_camera import FloorCamera, FloorMap, Mounting, Scene, Track
+from lanelib.geometry import Mounting
+from lanelib.sim.world import FloorCamera, FloorMap, Scene, Track
+from tools import evaluate_real
 
 
 @pytest.fixture(scope='module')
@@ -48,4 +49,6 @@ def test_the_improved_perception_reads_rendered_bends(labelled, tmp_path, capsys
 
 
 def test_a_folder_without_labels_is_an_error(tmp_path):
-    assert evaluate_real.main([str(tmp_path)]) == 2
+    with pytest.raises(SystemExit) as e:
+        evaluate_real.main([str(tmp_path)])
+    assert e.value.code == 2

@@ -5,7 +5,7 @@ import threading
 import numpy as np
 import pytest
 
-from frames import ListSource, Prefetch
+from lanelib.sources import ListSource, Prefetch
 
 
 def numbered(n):

@@ -1,11 +1,17 @@
 """The node's loop with the headless stand-in for rospy and a fake clock."""
 
+import io
+import json
+
 import numpy as np
 import pytest
 
-from frames import ListSource
-from kobuki_lane import Command, LaneFollower, LaneParams, LectureRule, safe
-from rospy_standin import SimClock, StandInRospy, Twist
+from kobuki_lane import LaneFollower, LaneParams, LectureRule
+from lanelib.outputs import Outputs
+from lanelib.robot import Command, within_limits
+from lanelib.rospy_standin import SimClock, StandInRospy, Twist
+from lanelib.safety import SafeBase
+from lanelib.sources import ListSource
 
 
 class ScriptedSource(ListSource):
@@ -28,7 +34,7 @@ class Scripted(LectureRule):
     """The lecture's perception with commands chosen by the test."""
 
     def __init__(self, decide):
-        super().__init__(LaneParams())
+        super().__init__(LaneParams(), camera=None)
         self.decide = decide
 
     def __call__(self, detection):
@@ -39,10 +45,19 @@ def blank_frames(n):
     return [np.full((480, 640, 3), 90, np.uint8) for _ in range(n)]
 
 
-def make(source, **params):
+def make(source, controller=None, **params):
+    """The loop on `source` with the stand-in on a simulated clock; decisions kept in memory."""
     ros = StandInRospy(SimClock(), quiet=True)
-    follower = LaneFollower(ros, Twist, source, LaneParams(**params), camera=None)
+    p = LaneParams(**params)
+    outputs = Outputs(p, decisions=io.StringIO())
+    follower = LaneFollower(ros, source, controller or LectureRule(p, camera=None),
+                            SafeBase(ros, Twist), outputs, p.rate)
     return ros, follower
+
+
+def records(follower):
+    """The decision records the loop wrote."""
+    return [json.loads(line) for line in follower.outputs.decisions.getvalue().splitlines()]
 
 
 def twists(ros):
@@ -62,8 +77,8 @@ def test_one_command_per_frame_at_4hz_then_a_zero():
 def test_every_branch_keeps_the_pace(monkeypatch):
     # left, right, straight and none in turn: the lecture slept only after straight
     decisions = iter(['left', 'right', 'straight', 'none'] * 2)
-    ros, follower = make(ListSource(blank_frames(8)))
-    follower.controller = Scripted(lambda d: Command(next(decisions), 0.01, 0.0))
+    ros, follower = make(ListSource(blank_frames(8)),
+                         Scripted(lambda d: Command(next(decisions), 0.01, 0.0)))
     follower.run()
     times = [t for t, _, _ in twists(ros)[:8]]
     assert np.allclose(np.diff(times), 0.25)
@@ -75,8 +90,8 @@ def test_slow_frames_do_not_slow_the_rate_and_a_stall_is_caught_up_like_rospy():
     def slow(i):
         clock_holder['ros'].clock.sleep(0.6 if i == 3 else 0.1)
 
-    ros, follower = make(ScriptedSource(blank_frames(8), on_read=slow))
-    follower.controller = Scripted(lambda d: Command('straight', 0.05, 0.0))
+    ros, follower = make(ScriptedSource(blank_frames(8), on_read=slow),
+                         Scripted(lambda d: Command('straight', 0.05, 0.0)))
     clock_holder['ros'] = ros
     follower.run()
     times = np.array([t for t, x, _ in twists(ros) if x == 0.05])
@@ -98,15 +113,15 @@ def gaps(ros):
 def test_the_watchdog_keeps_commands_coming_while_the_camera_stalls():
     holder = {}
     ros, follower = make(ScriptedSource(
-        blank_frames(6), on_read=lambda i: holder['ros'].clock.sleep(3.0 if i == 2 else 0.0)))
-    follower.controller = Scripted(lambda d: Command('left', 0.05, 0.5))
+        blank_frames(6), on_read=lambda i: holder['ros'].clock.sleep(3.0 if i == 2 else 0.0)),
+        Scripted(lambda d: Command('left', 0.05, 0.5)))
     holder['ros'] = ros
     follower.run()
-    safety = follower.safety
+    safety = follower.base.safety
     assert gaps(ros).max() <= safety.watchdog + safety.watchdog_check + 1e-9
     during = [(x, z) for t, x, z in twists(ros) if 0.5 < t < 3.5]
     assert len(during) >= 6 and all(c == (0.0, 0.0) for c in during)  # stopped, not turning
-    assert follower.watchdog_stops == len(during)
+    assert follower.base.watchdog_stops == len(during)
     assert any('no command for' in text for _, text in ros.log_lines)
 
 
@@ -114,19 +129,17 @@ def test_a_frame_that_takes_too_long_is_acted_on_with_a_stop():
     holder = {}
 
     class Slow(Scripted):
-        def perceive(self, frame, camera):
+        def perceive(self, frame, keep_stages=False):
             if holder['f'].frames == 2:
                 holder['ros'].clock.sleep(1.0)  # a pathological frame
-            return super().perceive(frame, camera)
+            return super().perceive(frame, keep_stages)
 
-    ros, follower = make(ListSource(blank_frames(5)))
-    follower.controller = Slow(lambda d: Command('right', 0.05, -0.5))
+    ros, follower = make(ListSource(blank_frames(5)), Slow(lambda d: Command('right', 0.05, -0.5)))
     holder.update(f=follower, ros=ros)
-    records = []
-    follower._write = records.append
     follower.run()
-    assert [r.get('late', False) for r in records] == [False, False, True, False, False]
-    assert records[2]['decision'] == 'none' and records[2]['angular_z'] == 0.0
+    written = records(follower)
+    assert [r.get('late', False) for r in written] == [False, False, True, False, False]
+    assert written[2]['decision'] == 'none' and written[2]['angular_z'] == 0.0
     assert gaps(ros).max() <= 0.5 + 1e-9
 
 
@@ -149,8 +162,7 @@ class Flaky(ScriptedSource):
 
 def test_a_camera_that_comes_back_is_reopened_and_driving_resumes():
     source = Flaky(blank_frames(8), fail_at=3, reopen_ok_after=2)
-    ros, follower = make(source)
-    follower.controller = Scripted(lambda d: Command('straight', 0.05, 0.0))
+    ros, follower = make(source, Scripted(lambda d: Command('straight', 0.05, 0.0)))
     assert follower.run() == 'camera lost'  # the frames run out at the end; live, so lost
     out = twists(ros)
     # frames 0-2, a stop at once (same time as the failed read), then frames 3.. after reopening
@@ -162,13 +174,12 @@ def test_a_camera_that_comes_back_is_reopened_and_driving_resumes():
 
 def test_a_camera_that_stays_lost_ends_the_run_after_the_retry_time():
     source = Flaky(blank_frames(8), fail_at=2, reopen_ok_after=10**6)
-    ros, follower = make(source)
-    follower.controller = Scripted(lambda d: Command('straight', 0.05, 0.0))
+    ros, follower = make(source, Scripted(lambda d: Command('straight', 0.05, 0.0)))
     assert follower.run() == 'camera lost'
     out = twists(ros)
     failed_at = out[2][0]
     assert all(x == 0.0 for _, x, _ in out[2:])  # never moves again
-    assert out[-1][0] - failed_at >= follower.safety.camera_retry
+    assert out[-1][0] - failed_at >= follower.base.safety.camera_retry
     assert gaps(ros).max() <= 0.5 + 1e-9  # stops kept coming while it retried
 
 
@@ -182,15 +193,14 @@ def test_a_stop_request_ends_the_loop_and_nothing_moves_after_the_zero():
     holder = {}
     source = ScriptedSource(blank_frames(10),
                             on_read=lambda i: i == 4 and holder['f'].request_stop('SIGINT'))
-    ros, follower = make(source)
-    follower.controller = Scripted(lambda detection: Command('straight', 0.2, 0.0))
+    ros, follower = make(source, Scripted(lambda detection: Command('straight', 0.2, 0.0)))
     holder['f'] = follower
     assert follower.run() == 'SIGINT'
     out = twists(ros)
     # the request came during the read of frame 4: that frame is finished, then the stop
     assert len(out) == 6 and out[-1][1:] == (0.0, 0.0)
     assert all(x == 0.2 for _, x, _ in out[:5])
-    follower._publish(Command('straight', 0.2, 0.0))  # a late command is refused
+    follower.base.publish(Command('straight', 0.2, 0.0))  # a late command is refused
     assert len(twists(ros)) == 6
 
 
@@ -206,31 +216,29 @@ def test_ros_shutdown_mid_run_publishes_the_stop_from_the_hook():
 
 
 def test_an_exception_on_one_frame_stops_the_robot_and_the_loop_goes_on():
-    ros, follower = make(ListSource(blank_frames(5)))
+    frames_done = {}
 
     def broken(detection):
-        if follower.frames == 2:
+        if frames_done['follower'].frames == 2:
             raise RuntimeError('boom')
         return Command('straight', 0.05, 0.0)
 
-    follower.controller = Scripted(broken)
-    records = []
-    follower._write = records.append
+    ros, follower = make(ListSource(blank_frames(5)), Scripted(broken))
+    frames_done['follower'] = follower
     assert follower.run() == 'end of input'
     assert [x for _, x, _ in twists(ros)] == [0.05, 0.05, 0.0, 0.05, 0.05, 0.0]
-    assert records[2]['error'] == 'RuntimeError: boom' and records[2]['decision'] == 'none'
+    written = records(follower)
+    assert written[2]['error'] == 'RuntimeError: boom' and written[2]['decision'] == 'none'
     assert any('RuntimeError: boom' in text for level, text in ros.log_lines if level == 'ERROR')
 
 
 def test_repeated_exceptions_end_the_run():
-    ros, follower = make(ListSource(blank_frames(20)))
-
     def broken(detection):
         raise ValueError('bad frame')
 
-    follower.controller = Scripted(broken)
+    ros, follower = make(ListSource(blank_frames(20)), Scripted(broken))
     assert follower.run() == 'pipeline errors'
-    assert follower.frames == follower.safety.max_errors
+    assert follower.frames == follower.base.safety.max_errors
     assert all(x == 0.0 for _, x, _ in twists(ros))
 
 
@@ -242,7 +250,7 @@ def test_repeated_exceptions_end_the_run():
     (Command('straight', 0.05, 0.0), (0.05, 0.0)),
 ])
 def test_commands_are_kept_within_the_kobuki_limits(command, expected):
-    c = safe(command)
+    c = within_limits(command)
     assert (c.linear_x, c.angular_z) == pytest.approx(expected)
 
 
@@ -256,32 +264,30 @@ def test_decision_records_have_the_documented_keys():
     assert record['linear_x'] == 0.0 and record['lines'] == 0
 
 
-def test_debug_images_are_built_only_while_someone_subscribes(monkeypatch):
+def test_debug_images_are_built_only_while_someone_subscribes():
     class Debug:
-        connections = 0
-        sent = []
+        """A debug topic whose subscribers come and go: asked once per frame."""
+
+        def __init__(self, connections):
+            self.connections, self.sent = iter(connections), []
 
         def get_num_connections(self):
-            return self.connections
+            return next(self.connections)
 
         def publish(self, msg):
             self.sent.append(msg)
 
-    import kobuki_lane
-
     built = []
-    monkeypatch.setattr(kobuki_lane, 'annotate', lambda *a: built.append(1) or a[0].image)
-    debug = Debug()
+
+    def draw(detection, command, p):
+        built.append(1)
+        return detection.image
+
+    debug = Debug([0, 0, 1, 1, 0, 0])
     ros = StandInRospy(SimClock(), quiet=True)
-    follower = LaneFollower(ros, Twist, ListSource(blank_frames(6)), LaneParams(), None,
-                            debug=(debug, lambda image: image.shape))
-    holder = iter([0, 0, 1, 1, 0, 0])
-    original = follower.step
-
-    def step(frame, label, read_at=None):
-        debug.connections = next(holder)
-        return original(frame, label, read_at)
-
-    follower.step = step
+    p = LaneParams()
+    outputs = Outputs(p, debug=(debug, lambda image: image.shape), draw=draw)
+    follower = LaneFollower(ros, ListSource(blank_frames(6)), LectureRule(p, camera=None),
+                            SafeBase(ros, Twist), outputs)
     follower.run()
     assert len(built) == 2 and debug.sent == [(480, 640, 3)] * 2

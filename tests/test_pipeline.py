@@ -1,13 +1,14 @@
-"""The optimised pipeline against the lecture's literal calls: the same segments, frame by frame."""
+"""The fast pipeline against detect(), the slides' calls: the same segments, frame by frame."""
 
 import cv2
 import numpy as np
 import pytest
 
-from bench import cluttered_frame, literal_lecture_pipeline, sample_frames, simulator_frames
-from calibration import LECTURE_CAMERA, calibration_camera, undistortion_maps
-from kobuki_lane import LaneParams, Pipeline, hough_lines, region_of_interest_vertices
-from lane_control import ImprovedController
+from kobuki_lane import LaneParams, calibration_camera, detect, make_controller
+from lanelib.camera import LECTURE_CAMERA, undistortion_maps
+from lanelib.fast import FastPipeline
+from lanelib.stages import hough_lines, region_of_interest_vertices
+from tools.bench import cluttered_frame, sample_frames, simulator_frames
 
 
 @pytest.fixture(scope='module')
@@ -19,15 +20,16 @@ def frames():
 
 
 @pytest.mark.parametrize('algorithm', ['1.1', '1.0'])
-def test_segments_identical_to_the_literal_pipeline(frames, algorithm):
-    pipeline = Pipeline(LaneParams(algorithm=algorithm))
+def test_segments_identical_to_detect(frames, algorithm):
+    p = LaneParams(algorithm=algorithm)
+    pipeline = FastPipeline(p, detect)
     found = 0
     for i, frame in enumerate(frames):
-        literal, theta = literal_lecture_pipeline(frame, algorithm)
+        reference = detect(frame, LECTURE_CAMERA, p)
         ours = pipeline(frame, LECTURE_CAMERA)
-        assert np.array_equal(ours.lines, literal), f'frame {i}'
-        assert ours.slopes.theta == pytest.approx(theta, abs=1e-9)
-        found += len(literal)
+        assert np.array_equal(ours.lines, reference.lines), f'frame {i}'
+        assert ours.slopes.theta == pytest.approx(reference.slopes.theta, abs=1e-9)
+        found += len(reference.lines)
     assert found > len(frames)  # the frames do have segments to compare
 
 
@@ -39,16 +41,16 @@ def test_undistortion_maps_give_exactly_cv2_undistort(frames):
 
 
 def test_the_whole_undistorted_image_is_still_there_for_pictures(frames):
-    detection = Pipeline(LaneParams())(frames[0], LECTURE_CAMERA)
+    detection = FastPipeline(LaneParams(), detect)(frames[0], LECTURE_CAMERA)
     assert np.array_equal(detection.image, calibration_camera(frames[0], LECTURE_CAMERA))
 
 
 def test_improved_perception_band_matches_the_whole_frame(frames):
-    improved = ImprovedController(LaneParams())
+    improved = make_controller('improved', LaneParams())
     for frame in frames[::4]:
-        fast = improved.perceive(frame, LECTURE_CAMERA)
+        fast = improved.perceive(frame)
         whole = improved.pipeline(frame, LECTURE_CAMERA, keep_stages=True,
-                                  roi=improved._roi[(id(LECTURE_CAMERA), 640, 480)])
+                                  roi=improved.roi(640, 480))
         assert np.array_equal(fast.lines, whole.lines)
 
 
@@ -65,28 +67,28 @@ def whole_frame(frame, p):
 def test_hysteresis_settings_still_match_the_whole_frame(frames):
     # with canny_low < canny_high weak edges may link across rows, so no rows are skipped
     p = LaneParams(canny_low=40.0, canny_high=120.0)
-    pipeline = Pipeline(p)
+    pipeline = FastPipeline(p, detect)
     for frame in frames[::10]:
         assert np.array_equal(pipeline(frame, LECTURE_CAMERA).lines, whole_frame(frame, p))
 
 
 def test_frame_size_and_camera_changes_rebuild_the_layout(frames):
-    pipeline = Pipeline(LaneParams())
+    pipeline = FastPipeline(LaneParams(), detect)
     small = cv2.resize(frames[3], (320, 240))
     a = pipeline(small, LECTURE_CAMERA).lines
     pipeline(frames[3], LECTURE_CAMERA)
     b = pipeline(small, LECTURE_CAMERA).lines
-    c = Pipeline(LaneParams())(small, None).lines
+    c = FastPipeline(LaneParams(), detect)(small, None).lines
     d = pipeline(small, None).lines
     assert np.array_equal(a, b) and np.array_equal(c, d)
 
 
 def test_improved_perception_does_not_read_dense_texture(frames):
-    improved = ImprovedController(LaneParams())
-    cluttered = improved.perceive(cluttered_frame(4), LECTURE_CAMERA)
+    improved = make_controller('improved', LaneParams())
+    cluttered = improved.perceive(cluttered_frame(4))
     assert cluttered.cluttered and len(cluttered.lines) == 0
     assert improved(cluttered).decision == 'none'  # no lane seen yet: stopped
-    tape = improved.perceive(frames[0], LECTURE_CAMERA)
+    tape = improved.perceive(frames[0])
     assert not tape.cluttered and len(tape.lines) > 0
     # the lecture's pipeline has no such bound
-    assert len(Pipeline(LaneParams())(cluttered_frame(4), LECTURE_CAMERA).lines) > 0
+    assert len(FastPipeline(LaneParams(), detect)(cluttered_frame(4), LECTURE_CAMERA).lines) > 0

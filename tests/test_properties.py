@@ -7,18 +7,12 @@ import numpy as np
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from calibration import LECTURE_CAMERA
-from kobuki_lane import (
-    KOBUKI_MAX_ANGULAR,
-    KOBUKI_MAX_LINEAR,
-    Detection,
-    LaneFollower,
-    LaneParams,
-    LectureRule,
-    slope_sum,
-)
-from lane_control import ImprovedController
-from rospy_standin import SimClock, StandInRospy, Twist
+from kobuki_lane import LaneFollower, LaneParams, LectureRule, make_controller
+from lanelib.camera import LECTURE_CAMERA
+from lanelib.robot import MAX_ANGULAR, MAX_LINEAR
+from lanelib.rospy_standin import SimClock, StandInRospy, Twist
+from lanelib.safety import SafeBase
+from lanelib.stages import Detection, slope_sum
 
 WORDS = {'left', 'right', 'straight', 'none'}
 
@@ -56,11 +50,11 @@ def images(draw):
     return img
 
 
-def follower(controller_name, algorithm):
+def follower(controller_name, algorithm, camera):
     ros = StandInRospy(SimClock(), quiet=True, keep=10)
     p = LaneParams(algorithm=algorithm)
-    controller = ImprovedController(p) if controller_name == 'improved' else LectureRule(p)
-    return ros, LaneFollower(ros, Twist, None, p, LECTURE_CAMERA, controller=controller)
+    controller = make_controller(controller_name, p, camera)
+    return ros, LaneFollower(ros, None, controller, SafeBase(ros, Twist), rate=p.rate)
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -74,14 +68,13 @@ def follower(controller_name, algorithm):
 @example(frame=np.zeros((1, 1), np.uint8), controller='improved', algorithm='1.1',
          camera=LECTURE_CAMERA)
 def test_any_image_gives_a_safe_command(frame, controller, algorithm, camera):
-    ros, f = follower(controller, algorithm)
-    f.camera = camera
+    ros, f = follower(controller, algorithm, camera)
     record = f.step(frame, 'x')
     _, _, twist = ros.published[-1]
     assert record['decision'] in WORDS
     assert math.isfinite(twist.linear.x) and math.isfinite(twist.angular.z)
-    assert abs(twist.linear.x) <= KOBUKI_MAX_LINEAR
-    assert abs(twist.angular.z) <= KOBUKI_MAX_ANGULAR
+    assert abs(twist.linear.x) <= MAX_LINEAR
+    assert abs(twist.angular.z) <= MAX_ANGULAR
     assert (twist.linear.x, twist.angular.z) == (record['linear_x'], record['angular_z'])
 
 

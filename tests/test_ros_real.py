@@ -10,16 +10,27 @@ import subprocess
 import sys
 import time
 
-from conftest import REPO, SAMPLES
+import pytest
+from helpers import NODE, REPO, SAMPLES, read_jsonl, wait_until
 
-from roslive import Listener, free_port, start_master, stop_master
-
-NODE = os.path.join(REPO, 'kobuki_lane.py')
+from tools.roslive import Listener, free_port, process_tree, start_master, stop_master
 
 
-def read_jsonl(path):
-    with open(path, encoding='utf-8') as f:
-        return [json.loads(line) for line in f]
+@pytest.fixture(autouse=True)
+def no_private_params_from_earlier_tests(roscore):
+    """Private parameters stay on the master after a node ends (roslaunch and _name:=value set
+    them there); each test starts without any."""
+    import rospy
+
+    def clear():
+        try:
+            rospy.delete_param('/kobuki_lane')
+        except KeyError:
+            pass
+
+    clear()
+    yield
+    clear()
 
 
 def run_node(roscore, args, timeout=60):
@@ -37,7 +48,7 @@ def start_node_on_samples(roscore):
 def assert_matches_decisions(messages, records):
     """One Twist per frame with the rule's values, in order, then a final zero."""
     assert len(messages) == len(records) + 1, (len(messages), len(records))
-    for (_, x, z), rec in zip(messages, records, strict=False):
+    for (_, x, z), rec in zip(messages, records):
         assert abs(x - rec['linear_x']) < 1e-9 and abs(z - rec['angular_z']) < 1e-9
     _, x, z = messages[-1]
     assert x == 0.0 and z == 0.0
@@ -116,6 +127,23 @@ def test_roslaunch_starts_the_node_with_its_launch_parameters(roscore, twist_rec
             assert abs(r['theta']) < 0.5
 
 
+def test_roslaunch_sets_only_what_the_user_sets(roscore, few_frames, tmp_path):
+    """Launch arguments left empty set no parameter, so the defaults table is the one truth."""
+    import rospy
+
+    decisions = tmp_path / 'defaults.jsonl'
+    cmd = ['roslaunch', 'kobuki_lane', 'kobuki_lane.launch', f'source:={few_frames}',
+           f'extra_args:=--decisions {decisions} --wait-for-base 0']
+    proc = subprocess.run(cmd, env=roscore['env'], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=90)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    assert [name for name in rospy.get_param_names() if name.startswith('/kobuki_lane/')] == []
+    records = read_jsonl(decisions)
+    assert len(records) == 8
+    assert all(r['decision'] == 'straight' for r in records)  # the table's threshold of 6
+    assert all(r['linear_x'] == 0.05 for r in records)  # and its straight_linear
+
+
 def test_rosnode_kill_stops_the_robot_before_exit(roscore, twist_recorder):
     proc = start_node_on_samples(roscore)
     twist_recorder.wait_for(3, timeout=20)
@@ -151,15 +179,17 @@ def test_master_restart_holds_the_robot_then_reconnects(roscore, tmp_path):
         assert len(listeners[0].wait_for(4, timeout=30)) >= 4
         stop_master(master)
         gone = time.time()
-        time.sleep(4)
-        during = [m for m in listeners[0].messages() if m[0] > gone + 1.5]
-        assert during and all(m[1:] == (0.0, 0.0) for m in during)  # held stopped
+
+        def during():  # what arrived once the master watch had had time to notice
+            return [m for m in listeners[0].messages() if m[0] > gone + 1.5]
+
+        wait_until(lambda: len(during()) >= 4, 30, 'commands while the master is gone')
+        assert all(m[1:] == (0.0, 0.0) for m in during())  # held stopped
         master = start_master(port, env)
         back = time.time()
-        time.sleep(3)
         listeners.append(Listener(env, tmp_path / 'after.log'))  # only finds a registered node
-        after = listeners[1].wait_for(4, timeout=20)
-        assert len(after) >= 4 and any(m[1] > 0 for m in after), after  # driving again
+        wait_until(lambda: len(listeners[1].messages()) >= 4 and
+                   any(m[1] > 0 for m in listeners[1].messages()), 30, 'driving again')
         node.send_signal(signal.SIGINT)
         _, err = node.communicate(timeout=20)
         assert node.returncode == 130, err
@@ -202,21 +232,42 @@ def test_debug_image_topic_carries_annotated_frames(roscore, few_frames):
 
 
 SOAK = '''
-import json, sys
-import soak
-soak.MASTER_RESTART = (1.0, (2.0, 3.0))  # a restart within the first seconds, then spaced
-soak.MASTER_SPACING = 6.0
-print(json.dumps(soak.soak('oval', 'improved', frames=360, seed=5, progress=False,
-                           rate=20.0, real_ros=True)))
+import json
+from tools import soak
+# a restart within the first seconds, then spaced
+print(json.dumps(soak.soak('oval', 'improved', frames=360, seed=5, progress=False, rate=20.0,
+                           real_ros=True, master_restart=(1.0, (2.0, 3.0)),
+                           master_spacing=6.0)))
 '''
 
 
-def test_ros_soak_holds_the_robot_through_master_crashes():
+def run_while_progressing(argv, out, err, stall=120.0):
+    """Run argv to its end, however long that takes on a loaded machine, as long as it keeps
+    writing (each frame logs a line); no output for `stall` seconds is a hang: the process
+    and everything it started are killed and the test fails."""
+    with open(out, 'w') as stdout, open(err, 'w') as stderr:
+        proc = subprocess.Popen(argv, cwd=REPO, stdout=stdout, stderr=stderr)
+    size, changed = -1, time.monotonic()
+    while proc.poll() is None:
+        now_size = os.path.getsize(out) + os.path.getsize(err)
+        if now_size != size:
+            size, changed = now_size, time.monotonic()
+        elif time.monotonic() - changed > stall:
+            for pid in reversed(process_tree(proc.pid)):
+                os.kill(pid, signal.SIGKILL)
+            proc.wait()
+            raise AssertionError(f'no output for {stall:.0f} s: hung; killed')
+        time.sleep(1.0)
+    with open(out) as stdout, open(err) as stderr:
+        return proc.returncode, stdout.read(), stderr.read()
+
+
+def test_ros_soak_holds_the_robot_through_master_crashes(tmp_path):
     """soak.py --ros in small: roscore killed (SIGKILL) and restarted under the running loop."""
-    proc = subprocess.run([sys.executable, '-c', SOAK], cwd=REPO, capture_output=True,
-                          text=True, timeout=180)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    result = json.loads(proc.stdout.strip().splitlines()[-1])
+    status, out, err = run_while_progressing([sys.executable, '-c', SOAK],
+                                             tmp_path / 'out.log', tmp_path / 'err.log')
+    assert status == 0, err[-3000:]
+    result = json.loads(out.strip().splitlines()[-1])
     assert result['ros'] == 'real roscore and rospy' and result['frames'] == 360
     assert result['master_restarts'] >= 1
     assert result['moving_while_master_lost'] == 0
@@ -225,5 +276,5 @@ def test_ros_soak_holds_the_robot_through_master_crashes():
     assert result['received'] >= 0.99 * result['commands']
     assert result['longest_gap_received_s'] < 0.6  # inside the Kobuki's own timeout
     assert result['last_received_is_stop']
-    assert 'does not answer: robot held stopped' in proc.stderr
-    assert 'is back: registered' in proc.stderr
+    assert 'does not answer: robot held stopped' in err
+    assert 'is back: registered' in err

@@ -8,10 +8,10 @@ import re
 import cv2
 import numpy as np
 import pytest
-from conftest import REPO, SAMPLES
+from helpers import REPO, SAMPLES
 
-import make_samples
 from kobuki_lane import main
+from tools import make_samples
 
 REGIONS = {'A': 'A straight', 'B': 'B left curve', 'C': 'C right curve'}
 

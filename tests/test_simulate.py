@@ -7,16 +7,18 @@ from dataclasses import replace
 import cv2
 import numpy as np
 import pytest
-from conftest import SAMPLES
+from helpers import SAMPLES
 
 import simulate
-from calibration import LECTURE_CAMERA
-from floor_camera import FloorCamera, FloorMap, Mounting, Scene, Track, camera_axes
-from kobuki_lane import LaneParams
+from kobuki_lane import LaneParams, make_controller
 from kobuki_lane import main as node_main
-from lane_control import ImprovedController, ImprovedParams, LaneMemory, measure
-from simulate import BaseLimits, DiffDriveBase
-from tracks import TrackError, from_dict, load_track
+from lanelib.camera import LECTURE_CAMERA
+from lanelib.geometry import Mounting, camera_axes
+from lanelib.improved import ImprovedParams, LaneMemory, measure
+from lanelib.sim.base import BaseLimits, DiffDriveBase
+from lanelib.sim.simulator import improved_params
+from lanelib.sim.tracks import TrackError, from_dict, load_track
+from lanelib.sim.world import FloorCamera, FloorMap, Scene, Track
 
 SHORT = {'lane_width': 0.35, 'tape_width': 0.03,
          'segments': [{'straight': 1.0}, {'arc': {'radius': 1.5, 'angle_deg': 45}},
@@ -101,9 +103,9 @@ def test_offset_and_heading_at_known_poses(straight_scene, offset, yaw_deg):
     track, floor_map, camera = straight_scene
     img = camera.render(floor_map, track.pose_at(1.0, offset, math.radians(yaw_deg)),
                         Scene(noise=3), np.random.default_rng(1))
-    ctl = ImprovedController(LaneParams())
-    detection = ctl.perceive(img, LECTURE_CAMERA)
-    est = measure(detection.lines, ctl._matrix, ctl.p)
+    ctl = make_controller('improved', LaneParams())
+    detection = ctl.perceive(img)
+    est = measure(detection.lines, ctl.matrix, ctl.p)
     assert est.left >= 1 and est.right >= 1
     assert est.offset == pytest.approx(offset, abs=0.02)
     assert math.degrees(est.heading) == pytest.approx(yaw_deg, abs=2.0)
@@ -114,20 +116,20 @@ def test_one_line_is_enough(straight_scene):
     track, _, camera = straight_scene
     gone = FloorMap(track, gaps=[dict(line='right', at=0.0, length=8.0)])
     img = camera.render(gone, track.pose_at(1.0, 0.03, 0.0), Scene(noise=0))
-    ctl = ImprovedController(LaneParams())
-    est = measure(ctl.perceive(img, LECTURE_CAMERA).lines, ctl._matrix, ctl.p)
+    ctl = make_controller('improved', LaneParams())
+    est = measure(ctl.perceive(img).lines, ctl.matrix, ctl.p)
     assert est.right == 0 and est.left >= 1
     assert est.offset == pytest.approx(0.03, abs=0.02)
     assert est.confidence < 1.0
 
 
 def test_lane_lost_for_longer_than_the_timeout_stops_the_robot():
-    ctl = ImprovedController(LaneParams(), ImprovedParams(lost_timeout=0.5))
+    ctl = make_controller('improved', LaneParams(), improved=ImprovedParams(lost_timeout=0.5))
     blank = np.full((480, 640, 3), 90, np.uint8)
     track = Track(segments=[{'straight': 8.0}], start=(-1.0, 0.0, 0.0))
     lane = FloorCamera(LECTURE_CAMERA).render(FloorMap(track), track.pose_at(1.0), Scene())
-    assert ctl(ctl.perceive(lane, LECTURE_CAMERA)).linear_x > 0
-    commands = [ctl(ctl.perceive(blank, LECTURE_CAMERA)) for _ in range(4)]
+    assert ctl(ctl.perceive(lane)).linear_x > 0
+    commands = [ctl(ctl.perceive(blank)) for _ in range(4)]
     assert commands[0].linear_x > 0 and commands[1].linear_x > 0  # coasting 0.25, 0.5 s
     assert commands[2].decision == 'none' and commands[2].linear_x == 0.0  # 0.75 s > 0.5 s
 
@@ -165,17 +167,12 @@ def test_lane_memory_holds_the_line_into_a_tight_bend():
                          {'straight': 0.8}]}
     with_memory = simulate.run(from_dict(dict(spec), 'bend'), 'improved')
     assert with_memory['completed'] and with_memory['max_offset_m'] < 0.03
-    original = simulate.make_controller
-    try:
-        def without(name, spec, params):
-            ctl = original(name, spec, params)
-            ctl.p = replace(ctl.p, memory=0.0, roi_far=2.0, curve_slowdown=0.8)
-            ctl.memory = None
-            return ctl
-        simulate.make_controller = without
-        without_memory = simulate.run(from_dict(dict(spec), 'bend'), 'improved')
-    finally:
-        simulate.make_controller = original
+    def without(name, spec, params):
+        improved = replace(improved_params(spec), memory=0.0, roi_far=2.0, curve_slowdown=0.8)
+        return make_controller(name, params, LECTURE_CAMERA, improved)
+
+    without_memory = simulate.run(from_dict(dict(spec), 'bend'), 'improved',
+                                  controller_factory=without)
     assert without_memory['max_offset_m'] > 2 * with_memory['max_offset_m']
 
 
@@ -282,14 +279,13 @@ def test_simulate_rejects_bad_scene_flags(args, capsys):
     assert 'error' in capsys.readouterr().err
 
 
-def test_soak_with_frequent_faults_never_moves_while_blind(monkeypatch):
-    import soak
+def test_soak_with_frequent_faults_never_moves_while_blind():
+    from tools import soak
 
     # every fault far more often than in the benchmark (0.04 per frame at 4 Hz), so a short
     # run meets each of them
-    monkeypatch.setattr(soak, 'FAULTS', {name: (0.16, span)
-                                         for name, (_, span) in soak.FAULTS.items()})
-    result = soak.soak('oval', 'improved', frames=160, seed=3, progress=False)
+    often = {name: (0.16, span) for name, (_, span) in soak.FAULTS.items()}
+    result = soak.soak('oval', 'improved', frames=160, seed=3, progress=False, faults=often)
     assert all(count > 0 for count in result['faults'].values()), result['faults']
     assert result['ended'] == 'end of input' and result['frames'] == 160
     assert result['longest_gap_s'] <= 0.5 + 1e-9
@@ -300,7 +296,7 @@ def test_soak_with_frequent_faults_never_moves_while_blind(monkeypatch):
 
 
 def test_soak_counts_commands_inside_fault_intervals():
-    import soak
+    from tools import soak
 
     commands = [(0.0, 0.1, 0.0), (1.0, 0.1, 0.0), (1.5, 0.0, 0.0), (2.0, 0.0, 0.3), (3.0, 0.1, 0)]
     assert soak.moving(commands, [[0.5, 2.0]]) == 2

@@ -6,15 +6,14 @@ import cv2
 import numpy as np
 import pytest
 
-from calibration import LECTURE_CAMERA, calibration_camera
-from floor_camera import FloorCamera, FloorMap, Mounting, Scene, Track
-from kobuki_lane import (
-    STOP,
+from kobuki_lane import LaneParams, LectureRule, calibration_camera, detect
+from lanelib.camera import LECTURE_CAMERA
+from lanelib.geometry import Mounting
+from lanelib.robot import STOP
+from lanelib.sim.world import FloorCamera, FloorMap, Scene, Track
+from lanelib.stages import (
     Detection,
-    LaneParams,
-    LectureRule,
     as_bgr,
-    detect,
     hough_lines,
     region_of_interest,
     region_of_interest_vertices,

@@ -3,9 +3,9 @@
 import os
 import re
 
-from conftest import REPO
+from helpers import REPO
 
-import make_walkthrough
+from tools import make_walkthrough
 
 DOCS = os.path.join(REPO, 'docs')
 
@@ -30,14 +30,14 @@ def test_every_picture_the_walkthrough_shows_exists_and_is_shown():
 def test_the_walkthroughs_figures_are_the_nodes(tmp_path):
     import cv2
 
-    from calibration import LECTURE_CAMERA
-    from kobuki_lane import LaneParams, LectureRule, Pipeline
+    from kobuki_lane import LaneParams, LectureRule, detect
+    from lanelib.camera import LECTURE_CAMERA
 
     text = open(os.path.join(DOCS, 'WALKTHROUGH.md'), encoding='utf-8').read()
     frame = cv2.imread(os.path.join(make_walkthrough.SAMPLES, make_walkthrough.FRAME))
     for algorithm, words, count in (('1.1', '+0.42 here', 1),
                                     ('1.0', 'segments and theta -5.55', 9)):
-        d = Pipeline(LaneParams(algorithm=algorithm))(frame, LECTURE_CAMERA)
+        d = detect(frame, LECTURE_CAMERA, LaneParams(algorithm=algorithm))
         assert words in text and f'{d.slopes.theta:+.2f}' in words
         assert len(d.lines) == count
         assert LectureRule(LaneParams())(d).decision == 'straight'

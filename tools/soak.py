@@ -28,14 +28,13 @@ non-zero commands published while the master was gone (after the master watch ha
 to notice), and how long after the master's return the robot drove again. The loop runs at
 --rate 20 by default there, so 10,000 frames take about 9 minutes instead of 42.
 
-usage:
-    python soak.py                           10,000 frames on the oval, improved controller
-    python soak.py --frames 2000 --track s_bend --json out/soak.json
-    python soak.py --ros --json out/soak_ros.json
+usage (from the repository root):
+    python -m tools.soak                     10,000 frames on the oval, improved controller
+    python -m tools.soak --frames 2000 --track s_bend --json out/soak.json
+    python -m tools.soak --ros --json out/soak_ros.json
 """
 
 import argparse
-import json
 import math
 import os
 import shutil
@@ -47,14 +46,17 @@ import time
 
 import numpy as np
 
-from bench import rss_mb
-from calibration import LECTURE_CAMERA
-from kobuki_lane import LaneFollower, LaneParams, MasterWatch, install_signal_handlers
-from roslive import Listener, free_port, node_env, start_master, stop_master
-from rospy_standin import SimClock, StandInRospy, Twist
-from settings import output_problem
-from simulate import TrackSimulator, make_controller
-from tracks import BUILTIN, load_track
+from kobuki_lane import LaneFollower, LaneParams, make_controller
+from lanelib.camera import LECTURE_CAMERA
+from lanelib.cli import check_output
+from lanelib.outputs import Outputs, Progress
+from lanelib.ros import MasterWatch
+from lanelib.rospy_standin import SimClock, StandInRospy, Twist
+from lanelib.safety import SafeBase, install_signal_handlers
+from lanelib.sim.simulator import TrackSimulator, improved_params
+from lanelib.sim.tracks import BUILTIN, load_track
+from tools.common import rss_mb, write_json
+from tools.roslive import Listener, free_port, node_env, start_master, stop_master
 
 FAULTS = {  # how often each starts, per second of running, and its duration range [s]
     'camera outage': (0.008, (0.5, 4.0)),
@@ -74,13 +76,13 @@ class FaultySimulator:
     skipped = 0
     total = None
 
-    def __init__(self, track, ros, rng, frames, rate, master=None):
+    def __init__(self, track, ros, rng, frames, rate, master=None, faults=FAULTS):
         self.track, self.ros, self.rng, self.limit = track, ros, rng, frames
-        self.rate, self.master = rate, master
+        self.rate, self.master, self.faults = rate, master, faults
         self.name = f'simulated {track}'
         self.commands = []  # (t, linear.x, angular.z) of every Twist published
         self.outages, self.covered = [], []  # [start, end] in the clock's seconds
-        self.injected = dict.fromkeys(FAULTS, 0)
+        self.injected = dict.fromkeys(faults, 0)
         self.laps = self.departures = self.frames = 0
         self.lap_ends = []  # (time, why)
         self.rss = {}
@@ -107,8 +109,8 @@ class FaultySimulator:
             return None
         return self.rng.uniform(*span)
 
-    def _starts(self, fault):
-        length = self.chance(*FAULTS[fault])
+    def starts(self, fault):
+        length = self.chance(*self.faults[fault])
         if length is not None:
             self.injected[fault] += 1
         return length
@@ -124,11 +126,11 @@ class FaultySimulator:
             return False, None, self.frames
         # outages are spaced out: two back to back are one long loss, which ends the run
         spaced = not self.outages or now > self.outages[-1][1] + 10.0
-        length = spaced and self._starts('camera outage')
+        length = spaced and self.starts('camera outage')
         if length:
             self.outages.append([now, now + length])
             return False, None, self.frames
-        delay = self._starts('slow read')
+        delay = self.starts('slow read')
         if delay:
             self.ros.clock.sleep(delay)
         ok, frame, _ = self.sim.read()
@@ -139,7 +141,7 @@ class FaultySimulator:
             if not ok:
                 self.lap_ends.append((round(now, 2), 'restart failed: ' + self.sim.ended))
                 return False, None, self.frames
-        length = self._starts('covered camera')
+        length = self.starts('covered camera')
         if length:
             self.covered.append([self.ros.get_time(), self.ros.get_time() + length])
         if self.covered and self.ros.get_time() < self.covered[-1][1]:
@@ -163,13 +165,13 @@ class FaultyController:
         self.inner, self.source = inner, source
         self.name = inner.name
 
-    def perceive(self, frame, camera):
-        delay = self.source._starts('slow frame')
+    def perceive(self, frame, keep_stages=False):
+        delay = self.source.starts('slow frame')
         if delay:
             self.source.ros.clock.sleep(delay)
-        if self.source._starts('pipeline error') is not None:  # (its duration is 0.0)
+        if self.source.starts('pipeline error') is not None:  # (its duration is 0.0)
             raise RuntimeError('injected pipeline error')
-        return self.inner.perceive(frame, camera)
+        return self.inner.perceive(frame, keep_stages)
 
     def __call__(self, detection):
         return self.inner(detection)
@@ -236,7 +238,8 @@ class RealRos:
     """A roscore that the soak kills and restarts at random, this process as the node, and a
     subscriber process logging what it receives."""
 
-    def __init__(self):
+    def __init__(self, restart=MASTER_RESTART, spacing=MASTER_SPACING):
+        self.restarts, self.spacing = restart, spacing  # see MASTER_RESTART, MASTER_SPACING
         self.port = free_port()
         self.home = tempfile.mkdtemp(prefix='kobuki_lane_soak_')
         uri = f'http://localhost:{self.port}'
@@ -263,9 +266,9 @@ class RealRos:
         """Called on every frame: kill roscore now and then, and start it again later."""
         if self._restarting is not None and self._restarting.is_alive():
             return
-        if self.outages and now < self.outages[-1][1] + MASTER_SPACING:
+        if self.outages and now < self.outages[-1][1] + self.spacing:
             return
-        down_for = source.chance(*MASTER_RESTART)
+        down_for = source.chance(*self.restarts)
         if down_for is None:
             return
         stop_master(self.master, signal.SIGKILL)
@@ -289,6 +292,7 @@ class RealRos:
         self.listener.close()
         self.ros.signal_shutdown('soak done')
         stop_master(self.master)
+        shutil.rmtree(self.home, ignore_errors=True)  # roscore's logs
         return received
 
 
@@ -321,29 +325,32 @@ def master_figures(world, commands, received, watch):
 # ---------------------------------------------------------------- the soak
 
 def soak(track='oval', controller='improved', frames=10000, seed=0, progress=True, rate=4.0,
-         real_ros=False, handle_signals=False):
+         real_ros=False, handle_signals=False, faults=FAULTS, master_restart=MASTER_RESTART,
+         master_spacing=MASTER_SPACING):
+    """The soak; its figures as a dict. faults: the fault table (FAULTS); master_restart and
+    master_spacing: how often roscore is killed with --ros (MASTER_RESTART, MASTER_SPACING)."""
     rng = np.random.default_rng(seed)
     params = LaneParams(rate=rate)
     world = watch = None
     if real_ros:
-        world = RealRos()
+        world = RealRos(master_restart, master_spacing)
         ros, twist_type = world.ros, world.twist_type
     else:
         ros, twist_type = StandInRospy(SimClock(), quiet=True, keep=100), Twist
     try:
-        source = FaultySimulator(track, ros, rng, frames, rate, master=world)
-        inner = make_controller(controller, load_track(track), params)
-        follower = LaneFollower(ros, twist_type, source, params, LECTURE_CAMERA,
-                                controller=FaultyController(inner, source),
-                                wait_for_base=10.0 if real_ros else 0.0)
+        source = FaultySimulator(track, ros, rng, frames, rate, world, faults)
+        spec = load_track(track)
+        inner = make_controller(controller, params, LECTURE_CAMERA,
+                                improved_params(spec) if controller == 'improved' else None)
+        base = SafeBase(ros, twist_type)
+        follower = LaneFollower(ros, source, FaultyController(inner, source), base,
+                                Outputs(params, progress=Progress(frames, progress)), rate)
         if handle_signals:  # Ctrl-C ends the soak with the robot stopped and its figures
-            install_signal_handlers(follower)
-        if progress:
-            follower.progress.enabled, follower.progress.total = True, frames
+            install_signal_handlers(follower.request_stop)
         if real_ros:
-            watch = MasterWatch(follower, ros).start()
+            watch = MasterWatch(base, ros).start()
         started = ros.get_time()
-        ended = follower.run()
+        ended = follower.run(10.0 if real_ros else 0.0)
         elapsed = ros.get_time() - started
     finally:
         if watch is not None:
@@ -361,7 +368,7 @@ def soak(track='oval', controller='improved', frames=10000, seed=0, progress=Tru
         faults=source.injected, laps_completed=source.laps, departures=source.departures,
         lap_ends={why: sum(1 for _, w in source.lap_ends if w == why)
                   for why in sorted({w for _, w in source.lap_ends})},
-        watchdog_stops=follower.watchdog_stops, frames_failed=follower.failed,
+        watchdog_stops=base.watchdog_stops, frames_failed=follower.failed,
         moving_while_camera_out=moving(source.commands, source.outages),
         moving_after_lane_lost=moving(source.commands, source.covered,
                                       lost_timeout + 1.0 / params.rate),
@@ -396,9 +403,8 @@ def main(argv=None):
     rate = args.rate or (20.0 if args.ros else 4.0)
     if not (math.isfinite(rate) and 0 < rate <= 30):
         parser.error(f'--rate {args.rate}: must be above 0 and at most 30 Hz')
-    problem = args.json and output_problem(args.json)
-    if problem:
-        parser.error(f"--json '{args.json}': {problem}")
+    if args.json:
+        check_output('tools.soak', args.json, '--json')
     if args.ros:
         if shutil.which('roscore') is None:
             parser.error("--ros needs Debian's ros-core (roscore); 'bash setup.sh test' "
@@ -407,9 +413,7 @@ def main(argv=None):
                   rate, args.ros, handle_signals=True)
     for key, value in result.items():
         print(f'{key}: {value}')
-    if args.json:
-        with open(args.json, 'w', encoding='utf-8') as f:
-            json.dump(result, f, indent=1)
+    write_json(args.json, result)
     return 0
 
 

@@ -1,4 +1,4 @@
-"""A floor-plane camera model: what a camera on a Kobuki sees of tape lines on the floor.
+"""The simulator's world: what a camera on a Kobuki sees of tape lines on the floor.
 
 The track is drawn once from above into a floor map (FLOOR_RES metres per pixel). Each camera
 pixel's ray, through the lens distortion, is intersected with the floor once per mounting;
@@ -6,8 +6,7 @@ rendering a pose is then one cv2.remap from the floor map. Rays that miss the fl
 beyond `max_range`, see a wall whose brightness changes with direction (furniture, doors):
 extra edges above the lane, like the lecture's "camera's view" for algorithm 1.0.
 
-Frames (robot): x forward, y left, z up, metres; yaw counter-clockwise, radians.
-Camera: OpenCV's (x right, y down, z along the optical axis), pitched down by `pitch_deg`.
+Frames and the camera's mounting: lanelib/geometry.py.
 """
 
 import math
@@ -16,14 +15,10 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from lanelib.geometry import Mounting, ray_directions, rays_to_floor
+from lanelib.robot import arc_step
+
 FLOOR_RES = 0.003  # [m/px] floor map resolution (a pixel 3 m ahead covers about 3.4 mm)
-
-
-@dataclass
-class Mounting:
-    height: float = 0.20  # [m] lens above the floor
-    pitch_deg: float = 0.0  # [deg] optical axis below horizontal
-    forward: float = 0.10  # [m] lens ahead of the robot's centre
 
 
 @dataclass
@@ -67,14 +62,7 @@ class Track:
             n = max(1, int(math.ceil(length / self.step)))
             ds = length / n
             for _ in range(n):
-                if curvature == 0.0:
-                    x, y = x + ds * math.cos(h), y + ds * math.sin(h)
-                else:
-                    h2 = h + curvature * ds
-                    r = 1.0 / curvature
-                    x += r * (math.sin(h2) - math.sin(h))
-                    y -= r * (math.cos(h2) - math.cos(h))
-                    h = h2
+                x, y, h = arc_step(x, y, h, 1.0, curvature, ds)  # unit speed: t is length
                 s += ds
                 pts.append((x, y, h, s))
         return np.array(pts)
@@ -95,46 +83,6 @@ class Track:
         normal = np.stack([-np.sin(c[:, 2]), np.cos(c[:, 2])], axis=1)
         half = self.lane_width / 2
         return c[:, :2] + half * normal, c[:, :2] - half * normal
-
-
-def camera_axes(pitch_deg):
-    """The camera's x (right), y (down) and z (optical axis) in the robot frame."""
-    p = math.radians(pitch_deg)
-    return (np.array([0.0, -1.0, 0.0]), np.array([-math.sin(p), 0.0, -math.cos(p)]),
-            np.array([math.cos(p), 0.0, -math.sin(p)]))
-
-
-def ray_directions(xn, yn, pitch_deg):
-    """Normalised image coordinates to ray directions (..., 3) in the robot frame."""
-    x_cam, y_cam, z_cam = camera_axes(pitch_deg)
-    xn, yn = np.asarray(xn, float)[..., None], np.asarray(yn, float)[..., None]
-    return xn * x_cam + yn * y_cam + z_cam
-
-
-def rays_to_floor(xn, yn, mounting):
-    """Normalised image coordinates to floor points (x, y) in the robot frame.
-
-    Returns x, y and a mask of the rays that point down to the floor.
-    """
-    d = ray_directions(xn, yn, mounting.pitch_deg)
-    down = -d[..., 2]
-    ok = down > 1e-9
-    t = mounting.height / np.where(ok, down, 1.0)
-    return mounting.forward + t * d[..., 0], t * d[..., 1], ok
-
-
-def pixels_to_floor(uv, matrix, mounting):
-    """Pixels of an undistorted image (camera matrix `matrix`) to floor points, robot frame."""
-    uv = np.asarray(uv, float)
-    xn = (uv[..., 0] - matrix[0, 2]) / matrix[0, 0]
-    yn = (uv[..., 1] - matrix[1, 2]) / matrix[1, 1]
-    return rays_to_floor(xn, yn, mounting)
-
-
-def floor_to_row(distance, matrix, mounting):
-    """The undistorted image row where floor `distance` metres ahead of the lens appears."""
-    angle = math.atan2(mounting.height, distance) - math.radians(mounting.pitch_deg)
-    return matrix[1, 2] + matrix[1, 1] * math.tan(angle)
 
 
 def tape_painted(s, side, gaps=(), dashes=None):

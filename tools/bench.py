@@ -8,13 +8,15 @@ every built-in track, with offsets, noise, a lighting gradient and gaps), prints
               literal  the slides' calls transcribed one by one (LITERAL below): cv2.undistort
                        on every frame, the unused gray in calibration_camera, the mask made
                        afresh, every row of the frame
-              project  kobuki_lane.Pipeline, the node's default (identical segments; see
-                       tests/test_pipeline.py)
+              project  lanelib.fast.FastPipeline, the node's default (segments identical
+                       to kobuki_lane.detect(); see tests/test_pipeline.py)
               floor    only the OpenCV calls no pipeline can avoid, each on its smallest input:
                        remap and gray on the triangle's pixels, blur, Canny and the mask on the
                        rectangles that hold its rows, HoughLinesP on the full-size image the
                        lecture's call gets
-              and the ratios project/literal and project/floor. One OpenCV thread, as on one core.
+              and the ratios project/literal and project/floor; and the whole frame for
+              slides   kobuki_lane.detect(), the slides' calls as the node shows them
+                       (--pipeline slides). One OpenCV thread, as on one core.
   latency     frame read -> Twist published, in LaneFollower's real loop (the stand-in rospy)
   throughput  whole-process dry runs (python kobuki_lane.py --dry-run) over a video of
               --video-frames frames, with the project's pipeline and with the literal one
@@ -23,10 +25,10 @@ every built-in track, with offsets, noise, a lighting gradient and gaps), prints
   worst case  the Hough stage on a cluttered frame (dense texture, many edges), for the lecture's
               settings and for the improved controller's perception
 
-usage:
-    python bench.py                      everything (about 2 minutes on 2 cores)
-    python bench.py --quick              fewer frames, no throughput or memory runs
-    python bench.py --json out/bench.json
+usage (from the repository root):
+    python -m tools.bench                      everything (about 2 minutes on 2 cores)
+    python -m tools.bench --quick              fewer frames, no throughput or memory runs
+    python -m tools.bench --json out/bench.json
 
 default values: 300 simulator frames plus the 28 samples, each timed 3 times; a 2,000-frame
 video; a 10,000-frame soak.
@@ -36,7 +38,6 @@ import argparse
 import json
 import math
 import os
-import platform
 import subprocess
 import sys
 import time
@@ -45,15 +46,21 @@ import cv2
 import numpy as np
 
 import kobuki_lane
-from calibration import LECTURE_CAMERA
-from floor_camera import FloorCamera, FloorMap
-from frames import ListSource
-from kobuki_lane import Detection, LaneFollower, LaneParams, Layout, Pipeline, slope_sum
-from rospy_standin import SimClock, StandInRospy, Twist
-from settings import output_problem
-from tracks import BUILTIN, load_track
+from kobuki_lane import LaneFollower, LaneParams, LectureRule, detect, make_controller
+from lanelib.camera import LECTURE_CAMERA
+from lanelib.cli import check_output
+from lanelib.fast import FastPipeline, Layout
+from lanelib.improved import ImprovedParams
+from lanelib.outputs import Outputs
+from lanelib.rospy_standin import SimClock, StandInRospy, Twist
+from lanelib.safety import SafeBase
+from lanelib.sim.simulator import VARIANTS, apply_variant
+from lanelib.sim.tracks import BUILTIN, load_track
+from lanelib.sim.world import FloorCamera, FloorMap
+from lanelib.sources import ListSource
+from lanelib.stages import Detection, slope_sum
+from tools.common import REPO, SAMPLES, machine, rss_mb, write_json
 
-SAMPLES = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'samples', 'track')
 OUT = os.path.join('out', 'bench')
 STAGES = ('undistort', 'gray', 'blur', 'canny', 'roi', 'hough', 'slopes')
 
@@ -169,7 +176,7 @@ class Floor:
         edged = [cv2.Canny(image, p.canny_low, p.canny_high) for image in blurred]
         mark('canny')
         if lay.mask is not None:
-            for e, (a, b, c0, c1) in zip(edged, rects, strict=True):
+            for e, (a, b, c0, c1) in zip(edged, rects):
                 cv2.bitwise_and(e, lay.mask[a:b, c0:c1], dst=lay.edges[a:b, c0:c1])
             edged = [lay.edges]
         mark('roi')
@@ -185,8 +192,6 @@ class Floor:
 def simulator_frames(count, seed=0):
     """`count` onboard views from every built-in track and benchmark condition, at random
     places along the track with offsets up to 6 cm and heading errors up to 8 degrees."""
-    from simulate import VARIANTS, apply_variant
-
     rng = np.random.default_rng(seed)
     specs = [apply_variant(load_track(name), variant) for name in BUILTIN for variant in VARIANTS]
     views = []
@@ -256,10 +261,11 @@ def stats(seconds):
 
 def time_pipelines(frames, repeats, algorithm='1.1'):
     """Literal, project and floor on the same frames, interleaved so that drift and cache
-    effects hit all three alike."""
+    effects hit all three alike; then detect() on the same frames (its whole time per frame:
+    it has no stage marks)."""
     p = LaneParams(algorithm=algorithm)
     clocks = {name: StageClock() for name in ('literal', 'project', 'floor')}
-    project = Pipeline(p, mark=clocks['project'].mark)
+    project = FastPipeline(p, detect, mark=clocks['project'].mark)
     floor = Floor(p, *frames[0].shape[1::-1])
     runs = [lambda f: literal_lecture_pipeline(f, algorithm, clocks['literal'].mark),
             lambda f: project(f, LECTURE_CAMERA),
@@ -268,8 +274,16 @@ def time_pipelines(frames, repeats, algorithm='1.1'):
         for i, frame in enumerate(frames):
             for k in range(3):  # each goes first, second and third in turn
                 runs[(i + k) % 3](frame)
-    return {name: {stage: stats(t) for stage, t in clock.times.items()}
-            for name, clock in clocks.items()}
+    result = {name: {stage: stats(t) for stage, t in clock.times.items()}
+              for name, clock in clocks.items()}
+    slides = []
+    for _ in range(repeats):
+        for frame in frames:
+            start = time.perf_counter()
+            detect(frame, LECTURE_CAMERA, p)
+            slides.append(time.perf_counter() - start)
+    result['slides'] = {'total': stats(slides)}
+    return result
 
 
 def latency(frames):
@@ -284,7 +298,8 @@ def latency(frames):
 
     ros = StandInRospy(SimClock(), quiet=True, keep=10)
     ros.listeners.append(lambda *_: delays.append(time.perf_counter() - read_at[-1]))
-    follower = LaneFollower(ros, Twist, TimedSource(frames), LaneParams(), LECTURE_CAMERA)
+    follower = LaneFollower(ros, TimedSource(frames), LectureRule(LaneParams()),
+                            SafeBase(ros, Twist))
     follower.run()
     return stats(delays[:-1])  # the last is the stop sent after the input ended
 
@@ -304,21 +319,16 @@ def throughput(video, count):
     """Whole-process dry runs over the video: the project's pipeline, then the literal one."""
     result = {}
     for name, cmd in (('project', ['kobuki_lane.py']),
-                      ('literal', ['bench.py', '--literal-dry-run'])):
-        argv = [sys.executable] + cmd + ['--source', video, '--dry-run', '--quiet',
-                                         '--progress', 'off']
+                      ('literal', ['-m', 'tools.bench', '--literal-dry-run'])):
+        argv = [sys.executable] + cmd + ['--source', os.path.abspath(video), '--dry-run',
+                                         '--quiet', '--progress', 'off']
         start = time.perf_counter()
-        subprocess.run(argv, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        subprocess.run(argv, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                       cwd=REPO)
         elapsed = time.perf_counter() - start
         result[name] = dict(frames=count, seconds=round(elapsed, 2),
                             fps=round(count / elapsed, 1))
     return result
-
-
-def rss_mb(field='VmRSS'):
-    """This process's resident memory (VmRSS) or its peak (VmHWM) in MB, from /proc."""
-    with open('/proc/self/status') as f:
-        return next(int(line.split()[1]) for line in f if line.startswith(field + ':')) / 1024
 
 
 def memory_child(count):
@@ -337,9 +347,10 @@ def memory_child(count):
 
     ros = StandInRospy(SimClock(), quiet=True, keep=100)
     os.makedirs(OUT, exist_ok=True)
+    p = LaneParams()
     with open(os.path.join(OUT, 'soak_decisions.jsonl'), 'w') as decisions:
-        LaneFollower(ros, Twist, Looped([]), LaneParams(), LECTURE_CAMERA,
-                     decisions=decisions).run()
+        LaneFollower(ros, Looped([]), LectureRule(p), SafeBase(ros, Twist),
+                     Outputs(p, decisions=decisions)).run()
     peak = rss_mb('VmHWM')  # ru_maxrss would carry the parent's peak over exec
     print(json.dumps(dict(frames=count, rss_1000_mb=round(marks[1000], 1),
                           rss_end_mb=round(marks[count], 1),
@@ -349,16 +360,14 @@ def memory_child(count):
 
 
 def memory(count):
-    out = subprocess.run([sys.executable, __file__, '--memory-child', str(count)], check=True,
-                         capture_output=True, text=True).stdout
+    out = subprocess.run([sys.executable, '-m', 'tools.bench', '--memory-child', str(count)],
+                         check=True, capture_output=True, text=True, cwd=REPO).stdout
     return json.loads(out.strip().splitlines()[-1])
 
 
 def worst_case(repeats=20):
     """The Hough stage on cluttered frames: the lecture's settings (never bounded), and the
     improved perception with and without its max_edge_fraction bound."""
-    from lane_control import ImprovedController, ImprovedParams
-
     def timed(make, frame):
         clock = StageClock()
         perceive = make(clock.mark)
@@ -368,14 +377,15 @@ def worst_case(repeats=20):
                     segments=int(len(det.lines)), skipped=bool(det.cluttered))
 
     def lecture(mark):
-        pipeline = Pipeline(LaneParams(), mark=mark)
+        pipeline = FastPipeline(LaneParams(), detect, mark=mark)
         return lambda frame: pipeline(frame, LECTURE_CAMERA)
 
     def improved(bound):
         def make(mark):
-            c = ImprovedController(LaneParams(), ImprovedParams(max_edge_fraction=bound))
+            c = make_controller('improved', LaneParams(), LECTURE_CAMERA,
+                                ImprovedParams(max_edge_fraction=bound))
             c.pipeline.mark = mark
-            return lambda frame: c.perceive(frame, LECTURE_CAMERA)
+            return c.perceive
         return make
 
     frame = cluttered_frame()
@@ -402,25 +412,18 @@ def table(results):
     return '\n'.join(rows)
 
 
-def machine():
-    cpu = platform.processor() or platform.machine()
-    try:
-        with open('/proc/cpuinfo') as f:
-            cpu = next(line.split(':', 1)[1].strip() for line in f if 'model name' in line)
-    except (OSError, StopIteration):
-        pass
-    return dict(cpu=cpu, cores=os.cpu_count(), python=platform.python_version(),
-                opencv=cv2.__version__, numpy=np.__version__)
-
-
 def literal_dry_run(argv):
     """kobuki_lane.py's own main(), with the lecture's literal calls as the pipeline."""
-    def perceive(self, frame, camera):
-        lines, _ = literal_lecture_pipeline(frame, self.p.algorithm)
-        return Detection(lines, slope_sum(lines, self.p.slope_min))
+    def literal(p):
+        def pipeline(frame, camera, keep_stages=False):
+            lines, _ = literal_lecture_pipeline(frame, p.algorithm)
+            return Detection(lines, slope_sum(lines, p.slope_min))
+        return pipeline
 
-    kobuki_lane.LectureRule.perceive = perceive
-    return kobuki_lane.main(argv)
+    def controller(name, params, camera, improved, pipeline):
+        return LectureRule(params, camera, literal(params))
+
+    return kobuki_lane.main(argv, make_controller=controller)
 
 
 def build_parser():
@@ -447,10 +450,8 @@ def main(argv=None):
     if argv[:1] == ['--memory-child']:
         return memory_child(int(argv[1]))
     args = build_parser().parse_args(argv)
-    problem = args.json and output_problem(args.json)
-    if problem:
-        print(f"bench.py: error: --json '{args.json}': {problem}", file=sys.stderr)
-        return 2
+    if args.json:
+        check_output('tools.bench', args.json, '--json')
     if args.quick:
         args.sim_frames, args.repeats = 60, 1
     cv2.setNumThreads(1)
@@ -470,7 +471,9 @@ def main(argv=None):
               '640x480, one OpenCV thread')
         print(table(res))
         print(f"speed-up over literal {res['ratios']['literal_over_project']}x; "
-              f"project/floor {res['ratios']['project_over_floor']}")
+              f"project/floor {res['ratios']['project_over_floor']}; detect() (--pipeline "
+              f"slides): median {res['slides']['total']['median_ms']:.3f} ms, p95 "
+              f"{res['slides']['total']['p95_ms']:.3f} ms")
     report['latency'] = latency(frames)
     print(f"\nframe read -> Twist published: median {report['latency']['median_ms']} ms, "
           f"p95 {report['latency']['p95_ms']} ms")
@@ -492,9 +495,7 @@ def main(argv=None):
         print(f"memory: RSS {mem['rss_1000_mb']} MB after 1,000 frames, {mem['rss_end_mb']} MB "
               f"after {mem['frames']:,}: growth {mem['growth_mb']} MB; peak RSS "
               f"{mem['peak_rss_mb']} MB")
-    if args.json:
-        with open(args.json, 'w', encoding='utf-8') as f:
-            json.dump(report, f, indent=1)
+    write_json(args.json, report)
     return 0
 
 

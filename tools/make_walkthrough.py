@@ -1,9 +1,9 @@
 #!/usr/bin/env python3
 """Regenerate the pictures of docs/WALKTHROUGH.md from samples/track, with the node's own code.
 
-usage:
-    python make_walkthrough.py              writes docs/img/*.png (small, 320 px wide)
-    python make_walkthrough.py --out DIR    somewhere else (the tests compare with docs/img)
+usage (from the repository root):
+    python -m tools.make_walkthrough            writes docs/img/*.png (small, 320 px wide)
+    python -m tools.make_walkthrough --out DIR  somewhere else (the tests compare with docs/img)
 """
 
 import argparse
@@ -12,20 +12,12 @@ import sys
 
 import cv2
 
-from calibration import LECTURE_CAMERA
-from kobuki_lane import (
-    STAGE_TITLES,
-    LaneParams,
-    LectureRule,
-    Pipeline,
-    annotate,
-    as_bgr,
-    contact_sheet,
-    stage_pictures,
-)
+from kobuki_lane import LaneParams, LectureRule, detect
+from lanelib.camera import LECTURE_CAMERA
+from lanelib.outputs import STAGE_TITLES, annotate, contact_sheet, stage_pictures
+from lanelib.stages import as_bgr
+from tools.common import REPO, SAMPLES
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-SAMPLES = os.path.join(HERE, 'samples', 'track')
 FRAME = '012_B.jpg'  # region B, bending left: both tapes and the wall in view
 WIDTH = 320
 
@@ -49,12 +41,12 @@ def make(folder):
     written = []
     for algorithm in ('1.1', '1.0'):
         p = LaneParams(algorithm=algorithm)
-        detection = Pipeline(p)(frame, LECTURE_CAMERA, keep_stages=True)
+        detection = detect(frame, LECTURE_CAMERA, p, keep_stages=True)
         command = LectureRule(p)(detection)
         if algorithm == '1.1':
             pictures = stage_pictures(detection, command, p)
             keys = [key for key, _ in STAGE_TITLES] + ['hough']
-            for k, ((_, image), key) in enumerate(zip(pictures, keys, strict=True)):
+            for k, ((_, image), key) in enumerate(zip(pictures, keys)):
                 written.append(write(folder, f'{k}_{key}.png', small(as_bgr(image))))
             sheet = contact_sheet(pictures, width=200, columns=4)
             written.append(write(folder, 'sheet.png', sheet))
@@ -66,7 +58,7 @@ def make(folder):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('--out', default=os.path.join(HERE, 'docs', 'img'))
+    parser.add_argument('--out', default=os.path.join(REPO, 'docs', 'img'))
     args = parser.parse_args(argv)
     names = make(args.out)
     size = sum(os.path.getsize(os.path.join(args.out, n)) for n in names)

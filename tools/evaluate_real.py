@@ -13,8 +13,8 @@ video) twice:
 
 A label 'no_lane' expects 'none'. A video counts once, by the decision most of its frames get.
 
-usage:
-    python evaluate_real.py ../shared/real-frames [--json out.json] [--details]
+usage (from the repository root):
+    python -m tools.evaluate_real ../shared/real-frames [--json out.json] [--details]
 
 Camera profiles (one per camera, never per frame):
     duckiebot  Duckietown's published default intrinsics (duckiefleet
@@ -30,17 +30,19 @@ Camera profiles (one per camera, never per frame):
 import argparse
 import collections
 import csv
-import json
 import os
 import sys
 
 import cv2
 import numpy as np
 
-from calibration import Camera
-from kobuki_lane import LaneParams, LectureRule, detect
-from lane_control import ImprovedController, ImprovedParams
-from settings import output_problem
+from kobuki_lane import LaneParams, LectureRule, detect, make_controller
+from lanelib.camera import Camera
+from lanelib.cli import check_output, fail
+from lanelib.improved import ImprovedParams
+from tools.common import write_json
+
+PROG = 'tools.evaluate_real'
 
 DUCKIEBOT_K = np.array([[307.7379294605756, 0, 329.692367951685],
                         [0, 314.9827773443905, 244.4605588877848], [0, 0, 1]])
@@ -68,8 +70,8 @@ def decide(frame, relpath):
     p = LaneParams()
     lecture = LectureRule(p)(detect(frame, None, p)).decision
     camera, ip = profile(relpath, frame.shape[1], frame.shape[0])
-    ctl = ImprovedController(p, ip)
-    command = ctl(ctl.perceive(frame, camera))
+    ctl = make_controller('improved', p, camera, ip)
+    command = ctl(ctl.perceive(frame))
     return lecture, command.decision, dict(ctl.extra(), angular_z=round(command.angular_z, 3))
 
 
@@ -137,17 +139,12 @@ def main(argv=None):
     parser.add_argument('--details', action='store_true', help='a table of every file')
     args = parser.parse_args(argv)
     if not os.path.isfile(os.path.join(args.folder, 'labels.csv')):
-        print(f"evaluate_real.py: error: no labels.csv in '{args.folder}'", file=sys.stderr)
-        return 2
-    problem = args.json and output_problem(args.json)
-    if problem:  # before the evaluation, not after it
-        print(f"evaluate_real.py: error: --json '{args.json}': {problem}", file=sys.stderr)
-        return 2
+        fail(PROG, f"no labels.csv in '{args.folder}'")
+    if args.json:  # before the evaluation, not after it
+        check_output(PROG, args.json, '--json')
     results = evaluate(args.folder)
     report(results, args.details)
-    if args.json:
-        with open(args.json, 'w', encoding='utf-8') as f:
-            json.dump(results, f, indent=1)
+    write_json(args.json, results)
     return 0
 
 

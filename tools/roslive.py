@@ -12,6 +12,8 @@ import sys
 import time
 import xmlrpc.client
 
+from tools.common import REPO
+
 VELOCITY = '/mobile_base/commands/velocity'
 
 
@@ -24,10 +26,9 @@ def free_port():
 def node_env(master_uri, ros_home, base=None):
     """Environment for a node process: this python's bin first on PATH, the repo as a package,
     logs under ros_home, everything on localhost."""
-    repo = os.path.dirname(os.path.abspath(__file__))
     env = dict(os.environ if base is None else base)
     env.update(ROS_MASTER_URI=master_uri, ROS_HOME=ros_home, ROS_LOG_DIR=ros_home,
-               ROS_PACKAGE_PATH=repo, PYTHONUNBUFFERED='1',
+               ROS_PACKAGE_PATH=REPO, PYTHONUNBUFFERED='1',
                PATH=os.path.dirname(sys.executable) + os.pathsep + env.get('PATH', ''))
     env.pop('ROS_IP', None)
     env['ROS_HOSTNAME'] = 'localhost'
@@ -75,6 +76,27 @@ def process_tree(pid):
         tree.append(todo.pop(0))
         todo.extend(children.get(tree[-1], []))
     return tree
+
+
+ROS_PROGRAMS = ('roscore', 'rosmaster', 'rosout', 'roslaunch', 'kobuki_lane.py', "'listener'",
+                'from tools import soak')
+
+
+def ros_processes():
+    """{pid: command line} of every running ROS 1 process (roscore, rosmaster, rosout,
+    roslaunch) and every kobuki_lane node or roslive subscriber."""
+    found = {}
+    for entry in os.listdir('/proc'):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f'/proc/{entry}/cmdline', 'rb') as f:
+                cmd = f.read().replace(b'\0', b' ').decode(errors='replace').strip()
+        except OSError:
+            continue  # gone meanwhile
+        if any(program in cmd for program in ROS_PROGRAMS):
+            found[int(entry)] = cmd[:200]
+    return found
 
 
 def stop_master(proc, sig=signal.SIGTERM, timeout=20.0):

@@ -190,7 +190,7 @@ def open_source(spec, warn=None, image_topic=None):
     """Open what --source names; SourceError if it cannot be opened."""
     spec = str(spec)
     if spec.lower().endswith('.bag') and os.path.isfile(spec):
-        from bags import BagError, BagSource
+        from lanelib.bags import BagError, BagSource
 
         try:
             return BagSource(spec, image_topic)

@@ -20,7 +20,8 @@ import math
 import os
 from dataclasses import dataclass, field
 
-from floor_camera import Mounting, Scene, Track
+from lanelib.geometry import Mounting
+from lanelib.sim.world import Scene, Track
 
 
 class TrackError(ValueError):

@@ -38,10 +38,11 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
-from calibration import LECTURE_CAMERA, calibration_camera
-from floor_camera import Mounting, floor_to_row, pixels_to_floor
-from kobuki_lane import STOP, Command, Pipeline
-from settings import finite, fraction, non_negative, positive, setting
+from lanelib.camera import LECTURE_CAMERA, undistortion_maps
+from lanelib.fast import FastPipeline
+from lanelib.geometry import Mounting, floor_to_row, pixels_to_floor
+from lanelib.robot import STOP, Command, arc_step
+from lanelib.settings import finite, fraction, non_negative, positive, setting
 
 
 @dataclass
@@ -136,7 +137,9 @@ def floor_roi(width, height, p, camera=None, margin=4):
     mask = np.zeros((height, width), np.uint8)
     mask[top:bottom] = 255
     if camera is not None:
-        filled = calibration_camera(np.full((height, width), 255, np.uint8), camera) == 255
+        white = np.full((height, width), 255, np.uint8)
+        filled = cv2.remap(white, *undistortion_maps(camera, width, height),
+                           cv2.INTER_LINEAR) == 255
         filled = cv2.erode(filled.astype(np.uint8) * 255, np.ones((3, 3), np.uint8),
                            iterations=margin)
         mask = cv2.bitwise_and(mask, filled)
@@ -153,7 +156,7 @@ def floor_segments(lines, matrix, p):
     x, y, ok = pixels_to_floor(lines.reshape(-1, 2, 2), matrix, p.mounting)
     keep = ok.all(axis=1) & (x.max(axis=1) < p.roi_far + 1.0)
     out = []
-    for (x0, x1), (y0, y1) in zip(x[keep], y[keep], strict=True):
+    for (x0, x1), (y0, y1) in zip(x[keep], y[keep]):
         if x1 < x0:  # direction ambiguity: make every segment point ahead
             x0, x1, y0, y1 = x1, x0, y1, y0
         length, phi = math.hypot(x1 - x0, y1 - y0), math.atan2(y1 - y0, x1 - x0)
@@ -174,9 +177,9 @@ def fit_sides(segments, guess, half):
         sides = np.array([1.0 if np.mean(sy - (a + b * sx + c * sx ** 2)) > 0 else -1.0
                           for sx, sy, _, _ in segments])
         cx = np.concatenate([sx + side * half * math.sin(phi)
-                             for (sx, _, _, phi), side in zip(segments, sides, strict=True)])
+                             for (sx, _, _, phi), side in zip(segments, sides)])
         cy = np.concatenate([sy - side * half * math.cos(phi)
-                             for (_, sy, _, phi), side in zip(segments, sides, strict=True)])
+                             for (_, sy, _, phi), side in zip(segments, sides)])
         a, b, c = fit_centre(cx, cy, w)
     misfit = float(np.sum(w * (cy - (a + b * cx + c * cx ** 2)) ** 2) / w.sum())
     return (a, b, c), sides, misfit, (cx, cy, w)
@@ -260,14 +263,7 @@ class LaneMemory:
         self.chunks = []  # (time, X, Y, weight)
 
     def move(self, v, omega, dt):
-        x, y, yaw = self.pose
-        if abs(omega) < 1e-9:
-            x, y = x + v * dt * math.cos(yaw), y + v * dt * math.sin(yaw)
-        else:
-            r = v / omega
-            x += r * (math.sin(yaw + omega * dt) - math.sin(yaw))
-            y -= r * (math.cos(yaw + omega * dt) - math.cos(yaw))
-        self.pose = np.array([x, y, yaw + omega * dt])
+        self.pose = np.array(arc_step(*self.pose, v, omega, dt))
         self.t += dt
         self.chunks = [c for c in self.chunks if self.t - c[0] <= self.seconds]
 
@@ -321,12 +317,18 @@ def steer_memory(memory, est, p):
 
 
 class ImprovedController:
-    """Perceive -> estimate -> steer, one frame at a time; drop-in for kobuki_lane.LectureRule."""
+    """Perceive -> estimate -> steer, one frame at a time; drop-in for kobuki_lane.LectureRule.
+
+    lane_params: the lecture's settings (blur, Canny, rate); reference: kobuki_lane.detect,
+    which the fast pipeline hands what it cannot speed up; p: ImprovedParams; camera: the
+    calibration (None: frames as they come, with the lecture camera's geometry scaled to them).
+    """
 
     name = 'improved'
 
-    def __init__(self, lane_params, p=None):
+    def __init__(self, lane_params, reference, p=None, camera=LECTURE_CAMERA):
         self.p = p or ImprovedParams()
+        self.camera = camera
         self.dt = 1.0 / lane_params.rate
         self.detect_params = replace(  # the lecture's blur and Canny settings stay
             lane_params, hough_rho=self.p.hough_rho_improved, hough_theta=math.pi / 180,
@@ -337,20 +339,24 @@ class ImprovedController:
         self.lost_for = math.inf  # [s] since the lane was last seen
         self.last = (0.0, 0.0)  # the last command (v, omega)
         self.cluttered = False  # the last frame had too many edges to read
-        self._matrix = None
+        self.matrix = None  # the undistorted frame's camera matrix
         self._roi = {}  # mask per (camera, width, height)
-        self.pipeline = Pipeline(self.detect_params, max_edge_fraction=self.p.max_edge_fraction)
+        self.pipeline = FastPipeline(self.detect_params, reference,
+                                     max_edge_fraction=self.p.max_edge_fraction)
         self.memory = LaneMemory(self.p.memory) if self.p.memory > 0 else None
 
-    def perceive(self, frame, camera, keep_stages=False):
+    def roi(self, width, height):
+        """The floor band's mask for this camera and frame size."""
+        key = (id(self.camera), width, height)
+        if key not in self._roi:
+            self._roi[key] = floor_roi(width, height, self.p, self.camera)
+        return self._roi[key]
+
+    def perceive(self, frame, keep_stages=False):
         h, w = frame.shape[:2]
         # with no calibration the pixels are taken as the lecture camera's, scaled to the frame
-        geometry = camera or LECTURE_CAMERA
-        self._matrix = geometry.scaled_to(w, h).matrix
-        key = (id(camera), w, h)
-        if key not in self._roi:
-            self._roi[key] = floor_roi(w, h, self.p, camera)
-        return self.pipeline(frame, camera, keep_stages, roi=self._roi[key])
+        self.matrix = (self.camera or LECTURE_CAMERA).scaled_to(w, h).matrix
+        return self.pipeline(frame, self.camera, keep_stages, roi=self.roi(w, h))
 
     def __call__(self, detection):
         p = self.p
@@ -362,7 +368,7 @@ class ImprovedController:
             remembered = self.memory.centre_line(0.2, 1.2, 0.3)
             if remembered is not None and prior is not None:
                 guide = replace(prior, a=remembered[0], b=remembered[1], c=remembered[2])
-        meas = measure(detection.lines, self._matrix, p, guide)
+        meas = measure(detection.lines, self.matrix, p, guide)
         if meas is not None:
             self.lost_for = 0.0
             self.estimate = blend(prior, meas, p.smoothing * meas.confidence) if prior else meas

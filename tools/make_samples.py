@@ -3,13 +3,13 @@
 
 The track is the lecture's, in three regions: A straight, B a left curve, C a right curve.
 A robot drives along its centre line (with a small, seeded wobble in offset and heading) and
-a frame is rendered every --spacing metres with floor_camera.py: the lecture's camera matrix
+a frame is rendered every --spacing metres with lanelib/sim/world.py: the lecture's camera matrix
 and distortion, a camera --height above the floor pitched --pitch degrees down, and a wall
 --max-range metres away. Frames are named NNN_<region>.jpg so that name order is driving order.
 
-usage:
-    python make_samples.py                       rewrite samples/track/ with the defaults
-    python make_samples.py --out /tmp/s --pitch 5 --noise 10
+usage (from the repository root):
+    python -m tools.make_samples                 rewrite samples/track/ with the defaults
+    python -m tools.make_samples --out /tmp/s --pitch 5 --noise 10
 
 default values: height 0.20 m, pitch 0 deg (a level webcam on the Kobuki's front), lane
 0.35 m, tape 0.03 m, floor 95 and tape 235 grey levels, noise sigma 3, seed 1.
@@ -23,8 +23,10 @@ import sys
 import cv2
 import numpy as np
 
-from calibration import LECTURE_CAMERA
-from floor_camera import FloorCamera, FloorMap, Mounting, Scene, Track
+from lanelib.camera import LECTURE_CAMERA
+from lanelib.geometry import Mounting
+from lanelib.sim.world import FloorCamera, FloorMap, Scene, Track
+from tools.common import SAMPLES
 
 # The lecture's track (slide at 08:30): region A straight, B bending left, C bending right.
 LECTURE_SEGMENTS = [
@@ -75,7 +77,7 @@ def make_frames(args):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('--out', default=os.path.join('samples', 'track'), help='output folder')
+    parser.add_argument('--out', default=SAMPLES, help='output folder')
     parser.add_argument('--height', type=float, default=0.20, help='camera height [m]')
     parser.add_argument('--pitch', type=float, default=0.0, help='camera pitch down [deg]')
     parser.add_argument('--lane-width', type=float, default=0.35, help='between tape centres [m]')

@@ -1,0 +1,57 @@
+"""The camera's mounting on the robot: undistorted pixels to floor points, and back.
+
+Frames (robot): x forward, y left, z up, metres; yaw counter-clockwise, radians.
+Camera: OpenCV's (x right, y down, z along the optical axis), pitched down by `pitch_deg`.
+"""
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class Mounting:
+    height: float = 0.20  # [m] lens above the floor
+    pitch_deg: float = 0.0  # [deg] optical axis below horizontal
+    forward: float = 0.10  # [m] lens ahead of the robot's centre
+
+
+def camera_axes(pitch_deg):
+    """The camera's x (right), y (down) and z (optical axis) in the robot frame."""
+    p = math.radians(pitch_deg)
+    return (np.array([0.0, -1.0, 0.0]), np.array([-math.sin(p), 0.0, -math.cos(p)]),
+            np.array([math.cos(p), 0.0, -math.sin(p)]))
+
+
+def ray_directions(xn, yn, pitch_deg):
+    """Normalised image coordinates to ray directions (..., 3) in the robot frame."""
+    x_cam, y_cam, z_cam = camera_axes(pitch_deg)
+    xn, yn = np.asarray(xn, float)[..., None], np.asarray(yn, float)[..., None]
+    return xn * x_cam + yn * y_cam + z_cam
+
+
+def rays_to_floor(xn, yn, mounting):
+    """Normalised image coordinates to floor points (x, y) in the robot frame.
+
+    Returns x, y and a mask of the rays that point down to the floor.
+    """
+    d = ray_directions(xn, yn, mounting.pitch_deg)
+    down = -d[..., 2]
+    ok = down > 1e-9
+    t = mounting.height / np.where(ok, down, 1.0)
+    return mounting.forward + t * d[..., 0], t * d[..., 1], ok
+
+
+def pixels_to_floor(uv, matrix, mounting):
+    """Pixels of an undistorted image (camera matrix `matrix`) to floor points, robot frame."""
+    uv = np.asarray(uv, float)
+    xn = (uv[..., 0] - matrix[0, 2]) / matrix[0, 0]
+    yn = (uv[..., 1] - matrix[1, 2]) / matrix[1, 1]
+    return rays_to_floor(xn, yn, mounting)
+
+
+def floor_to_row(distance, matrix, mounting):
+    """The undistorted image row where floor `distance` metres ahead of the lens appears."""
+    angle = math.atan2(mounting.height, distance) - math.radians(mounting.pitch_deg)
+    return matrix[1, 2] + matrix[1, 1] * math.tan(angle)

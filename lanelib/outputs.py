@@ -1,0 +1,196 @@
+"""What a run leaves behind: decision records, annotated pictures, stage sheets, video, progress.
+
+The annotated picture (the lecture's green segments on the undistorted frame, plus what was
+decided) is drawn only when something takes it: the video, a bag that records frames, the
+debug image topic while someone subscribes, or the window.
+"""
+
+import json
+import os
+import sys
+import time
+
+import cv2
+import numpy as np
+
+from lanelib.stages import as_bgr, region_of_interest_vertices
+
+STAGE_TITLES = (('raw', 'raw frame'), ('undistorted', '1 calibration_camera: undistorted'),
+                ('gray', '2 cvtColor: gray'), ('blurred', '3 GaussianBlur 5x5'),
+                ('edges', '4 Canny 85, 85'), ('roi', '5 region_of_interest: the triangle'),
+                ('masked', '6 edges inside the triangle'))
+
+
+def annotate(detection, command, p):
+    """The lecture's green segments on the undistorted frame, plus what was decided."""
+    image = detection.image.copy()
+    h, w = image.shape[:2]
+    if p.algorithm == '1.1':
+        cv2.polylines(image, region_of_interest_vertices(w, h), True, (0, 200, 255), 1)
+    for x1, y1, x2, y2 in detection.lines.tolist():
+        cv2.line(image, (x1, y1), (x2, y2), (0, 255, 0), 2)
+    s = detection.slopes
+    text = (f'{command.decision}  theta {s.theta:+.2f}  value {s.value:+.3f}  '
+            f'{len(detection.lines)} lines  v {command.linear_x:.2f} w {command.angular_z:+.2f}')
+    scale = max(0.3, w / 1400)
+    band = int(28 * scale / 0.45)
+    cv2.rectangle(image, (0, 0), (w, band), (0, 0, 0), -1)
+    cv2.putText(image, text, (5, int(band * 0.7)), cv2.FONT_HERSHEY_SIMPLEX, scale,
+                (255, 255, 255), 1, cv2.LINE_AA)
+    return image
+
+
+def stage_pictures(detection, command, p, draw=annotate):
+    """(title, BGR image) for every stage of a detection made with keep_stages=True, ending
+    with the Hough segments, theta, value and the decision."""
+    pictures = [(title, as_bgr(detection.stages[key])) for key, title in STAGE_TITLES]
+    pictures.append(('7 HoughLinesP, theta, decision', draw(detection, command, p)))
+    return pictures
+
+
+def contact_sheet(pictures, width=320, columns=4):
+    """The pictures side by side, each scaled to `width` with its title above it."""
+    tiles = []
+    for title, image in pictures:
+        h, w = image.shape[:2]
+        tile = cv2.resize(image, (width, max(1, round(h * width / w))),
+                          interpolation=cv2.INTER_AREA)
+        band = np.zeros((22, width, 3), np.uint8)
+        cv2.putText(band, title, (4, 15), cv2.FONT_HERSHEY_SIMPLEX, 0.42, (255, 255, 255), 1,
+                    cv2.LINE_AA)
+        tiles.append(np.vstack([band, tile]))
+    height = max(t.shape[0] for t in tiles)
+    tiles = [cv2.copyMakeBorder(t, 0, height - t.shape[0], 0, 0, cv2.BORDER_CONSTANT)
+             for t in tiles]
+    tiles += [np.zeros_like(tiles[0])] * (-len(tiles) % columns)
+    rows = [np.hstack(tiles[i:i + columns]) for i in range(0, len(tiles), columns)]
+    return np.vstack(rows)
+
+
+def write_stages(folder, index, detection, command, p, draw=annotate):
+    """NNNN_K_stage.png for each stage of frame NNNN, and NNNN_sheet.png with all of them."""
+    pictures = stage_pictures(detection, command, p, draw)
+    keys = [key for key, _ in STAGE_TITLES] + ['hough']
+    for k, ((_, image), key) in enumerate(zip(pictures, keys)):
+        cv2.imwrite(os.path.join(folder, f'{index:04d}_{k}_{key}.png'), image)
+    cv2.imwrite(os.path.join(folder, f'{index:04d}_sheet.png'), contact_sheet(pictures))
+
+
+def decision_record(index, label, detection, command, t, extra):
+    """One line of --decisions: what the frame showed and what was decided."""
+    s = detection.slopes
+    return dict(frame=index, source=label, lines=int(len(detection.lines)),
+                theta=round(s.theta, 6), value=round(s.value, 6), decision=command.decision,
+                linear_x=command.linear_x, angular_z=command.angular_z, t=round(t, 6),
+                left_count=s.left_count, right_count=s.right_count, vertical=s.vertical,
+                **extra)
+
+
+class VideoSink:
+    """Annotated frames to a video file, at the loop rate; opened on the first frame."""
+
+    def __init__(self, path, fps):
+        self.path, self.fps = path, fps
+        self._writer, self._size = None, None
+
+    def write(self, image):
+        if self._writer is None:
+            self._size = (image.shape[1], image.shape[0])
+            fourcc = 'mp4v' if self.path.lower().endswith('.mp4') else 'MJPG'
+            self._writer = cv2.VideoWriter(self.path, cv2.VideoWriter_fourcc(*fourcc),
+                                           self.fps, self._size)
+            if not self._writer.isOpened():
+                raise OSError(f"cannot write video '{self.path}' (use .avi or .mp4)")
+        if (image.shape[1], image.shape[0]) != self._size:
+            image = cv2.resize(image, self._size)
+        self._writer.write(image)
+
+    def close(self):
+        if self._writer is not None:
+            self._writer.release()
+
+
+class Progress:
+    """A one-line progress display on stderr, redrawn at most twice a second."""
+
+    def __init__(self, total=None, enabled=False, stream=sys.stderr):
+        self.total, self.enabled, self.stream = total, enabled, stream
+        self.start = time.monotonic()
+        self.frames = 0
+        self._last = 0.0
+
+    def update(self, frames, final=False):
+        now = time.monotonic()
+        self.frames = frames
+        if not self.enabled or (now - self._last < 0.5 and not final):
+            return
+        self._last = now
+        of = f'/{self.total}' if self.total else ''
+        fps = frames / max(now - self.start, 1e-9)
+        self.stream.write(f'\rframe {frames}{of}  {fps:.1f} frames/s ')
+        self.stream.flush()
+
+    def done(self):
+        if self.enabled:
+            self.update(self.frames, final=True)
+            self.stream.write('\n')
+
+
+class Outputs:
+    """Where each frame's results go. p: the lecture's settings (the pictures draw its ROI).
+
+    decisions: a text file for JSON Lines; video: a VideoSink; stages: a folder for every
+    stage of every frame; bag: a bags.BagRecorder (frames, if it records them); debug:
+    (publisher, message maker) for the debug image topic; show: a window; draw: what makes
+    the annotated picture (annotate)."""
+
+    def __init__(self, p, decisions=None, video=None, stages=None, bag=None, debug=None,
+                 show=False, progress=None, draw=annotate):
+        self.p, self.decisions, self.video, self.stages = p, decisions, video, stages
+        self.bag, self.show, self.draw = bag, show, draw
+        self.debug, self.debug_message = debug or (None, None)
+        self.progress = progress or Progress()
+
+    def write(self, record):
+        if self.decisions is not None:
+            self.decisions.write(json.dumps(record) + '\n')
+            self.decisions.flush()
+
+    def frame(self, record, detection, command, t):
+        """A frame's record and pictures; True if the window's user pressed q."""
+        self.write(record)
+        if self.stages:
+            write_stages(self.stages, record['frame'], detection, command, self.p, self.draw)
+        quit_pressed = False
+        sinks = self._picture_sinks(t)
+        if sinks or self.show:  # the annotated picture is drawn only when something takes it
+            image = self.draw(detection, command, self.p)
+            for sink in sinks:
+                sink(image)
+            if self.show:
+                cv2.imshow('kobuki_lane', image)
+                quit_pressed = cv2.waitKey(1) & 0xFF == ord('q')
+        self.progress.update(record['frame'] + 1)
+        return quit_pressed
+
+    def _picture_sinks(self, t):
+        sinks = []
+        if self.video is not None:
+            sinks.append(self.video.write)
+        if self.bag is not None and self.bag.images:
+            sinks.append(lambda image: self.bag.image(t, image))
+        if self.debug is not None and self.debug.get_num_connections() > 0:
+            sinks.append(lambda image: self.debug.publish(self.debug_message(image)))
+        return sinks
+
+    def close(self):
+        for sink in (self.decisions, self.video, self.bag):
+            if sink is not None:
+                sink.close()
+
+
+def summary(frames, skipped, counts, elapsed, ended):
+    fps = frames / elapsed if elapsed > 0 else 0.0
+    return (f'kobuki_lane: {frames} frames ({skipped} skipped) in {elapsed:.2f} s, {fps:.1f} '
+            f'frames/s: left {counts["left"]}, right {counts["right"]}, straight '
+            f'{counts["straight"]}, none {counts["none"]}; ended: {ended}')

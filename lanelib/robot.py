@@ -1,0 +1,44 @@
+"""The Kobuki, as far as the node and the simulator need it: the command, its limits, its motion.
+
+Limits from Kobuki's documentation and driver: top speed 0.7 m/s, top turn rate pi rad/s
+(kobuki_node clips to these), and the driver stops the wheels when no command has come for
+0.6 s (kobuki_node's cmd_vel_timeout).
+"""
+
+import math
+from dataclasses import dataclass
+
+VELOCITY_TOPIC = '/mobile_base/commands/velocity'  # kobuki_node's velocity command input
+MAX_LINEAR = 0.7  # [m/s] the Kobuki's top speed
+MAX_ANGULAR = math.pi  # [rad/s] the Kobuki's top turn rate
+COMMAND_TIMEOUT = 0.6  # [s] the driver stops the wheels after this long without a command
+
+
+@dataclass(frozen=True)
+class Command:
+    decision: str  # left | right | straight | none
+    linear_x: float  # [m/s]
+    angular_z: float  # [rad/s]
+
+
+STOP = Command('none', 0.0, 0.0)
+
+
+def within_limits(command):
+    """The command within the Kobuki's limits; anything not finite becomes a stop."""
+    if not (math.isfinite(command.linear_x) and math.isfinite(command.angular_z)):
+        return STOP
+    return Command(command.decision,
+                   min(max(command.linear_x, -MAX_LINEAR), MAX_LINEAR),
+                   min(max(command.angular_z, -MAX_ANGULAR), MAX_ANGULAR))
+
+
+def arc_step(x, y, yaw, v, omega, dt):
+    """Unicycle motion, exactly along the arc: the pose after `dt` s at (v [m/s], omega
+    [rad/s]) from (x, y [m], yaw [rad]). The simulated base, the lane memory's dead reckoning
+    and the track's centre line all move this way."""
+    yaw2 = yaw + omega * dt
+    if abs(omega) < 1e-9:
+        return x + v * dt * math.cos(yaw), y + v * dt * math.sin(yaw), yaw2
+    r = v / omega
+    return x + r * (math.sin(yaw2) - math.sin(yaw)), y - r * (math.cos(yaw2) - math.cos(yaw)), yaw2

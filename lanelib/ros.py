@@ -1,0 +1,152 @@
+"""ROS 1 plumbing: connecting to the master, watching it, the debug image topic, private params.
+
+Everything here uses Debian's rospy (python3-rospy), imported only when called, so that dry
+runs and tests need no ROS at all.
+"""
+
+import os
+import socket
+import threading
+import xmlrpc.client
+
+import cv2
+
+
+class RosUnavailable(Exception):
+    """ROS cannot be used: not installed, or no master answers. The message says what to do."""
+
+
+def split_ros_args(argv):
+    """Separate rospy's name:=value arguments from ours; _name:=value are private params."""
+    import yaml
+
+    ours, private = [], {}
+    for arg in argv:
+        if ':=' in arg:
+            name, value = arg.split(':=', 1)
+            if name.startswith('_') and not name.startswith('__'):
+                private[name[1:]] = yaml.safe_load(value)
+        else:
+            ours.append(arg)
+    return ours, private
+
+
+def master_online(timeout=3.0):
+    """True if the ROS master at ROS_MASTER_URI answers within `timeout` seconds."""
+    import rosgraph
+
+    old = socket.getdefaulttimeout()
+    socket.setdefaulttimeout(timeout)
+    try:
+        return rosgraph.is_master_online()
+    finally:
+        socket.setdefaulttimeout(old)
+
+
+def connect_ros(name='kobuki_lane'):
+    """The real rospy and Twist, with the node registered (rospy reads _name:=value itself);
+    RosUnavailable if ROS is not installed or no master answers."""
+    try:
+        import rospy
+        from geometry_msgs.msg import Twist
+    except ImportError as e:
+        raise RosUnavailable(f"ROS 1 is not importable ({e}); install Debian's python3-rospy "
+                             'and python3-geometry-msgs, or use --dry-run') from None
+    uri = os.environ.get('ROS_MASTER_URI', 'http://localhost:11311 (ROS_MASTER_URI unset)')
+    if not master_online():
+        raise RosUnavailable(f'no ROS master answers at {uri}; start roscore (or roslaunch '
+                             'kobuki_node minimal.launch), or use --dry-run')
+    # our own signal handlers send the stop before rospy is told to shut down
+    rospy.init_node(name, disable_signals=True)
+    return rospy, Twist
+
+
+class TimeoutTransport(xmlrpc.client.Transport):
+    """XML-RPC over HTTP that gives up after `timeout` seconds (a host that vanished would
+    otherwise hang the caller), without touching the process-wide socket timeout rospy uses."""
+
+    def __init__(self, timeout):
+        super().__init__()
+        self.timeout = timeout
+
+    def make_connection(self, host):
+        conn = super().make_connection(host)
+        conn.timeout = self.timeout
+        return conn
+
+
+class MasterWatch:
+    """Watches the ROS master from a thread. While it is gone the robot is held stopped (the
+    connection to the base is peer to peer and still works); when a master answers again the
+    node's publishers are registered with it again, which rospy does not do by itself, and
+    driving resumes. Both are logged. base: a safety.SafeBase."""
+
+    def __init__(self, base, rospy, period=1.0, timeout=1.0):
+        self.base, self.rospy, self.period, self.timeout = base, rospy, period, timeout
+        self.uri = os.environ.get('ROS_MASTER_URI', 'http://localhost:11311')
+        self.lost = False
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._watch, name='master-watch', daemon=True)
+
+    def start(self):
+        self._thread.start()
+        return self
+
+    def stop(self):
+        self._stop.set()
+
+    def _master(self):
+        return xmlrpc.client.ServerProxy(self.uri, transport=TimeoutTransport(self.timeout))
+
+    def alive(self):
+        try:
+            code, _, _ = self._master().getPid(self.rospy.get_name())
+            return code == 1
+        except Exception:  # refused, reset, timed out, a bad reply: not there
+            return False
+
+    def _register_again(self):
+        from rospy.impl.registration import get_topic_manager
+
+        master, me, api = self._master(), self.rospy.get_name(), self.rospy.get_node_uri()
+        topics = get_topic_manager().get_publications()
+        for topic, data_type in topics:
+            master.registerPublisher(me, topic, data_type, api)
+        return [topic for topic, _ in topics]
+
+    def _watch(self):
+        log = self.rospy
+        while not self._stop.wait(self.period):
+            alive = self.alive()
+            if not alive and not self.lost:
+                self.lost = True
+                self.base.hold('ROS master lost')
+                log.logwarn('ROS master at %s does not answer: robot held stopped until it is '
+                            'back', self.uri)
+            elif alive and self.lost:
+                try:
+                    topics = self._register_again()
+                except Exception as e:  # it went away again, or refused: try next time
+                    log.logwarn('ROS master at %s is back but registering failed (%s); '
+                                'still holding the robot stopped', self.uri, e)
+                    continue
+                self.lost = False
+                self.base.resume()
+                log.logwarn('ROS master at %s is back: registered %s again; driving again',
+                            self.uri, ', '.join(topics))
+
+
+def debug_publisher(rospy):
+    """~debug_image/compressed: the annotated frames, for rqt_image_view; the node builds them
+    only while something subscribes. Returns (publisher, message maker)."""
+    from sensor_msgs.msg import CompressedImage
+
+    def message(image):
+        msg = CompressedImage()
+        msg.header.stamp = rospy.Time.now()
+        msg.header.frame_id = 'camera'
+        msg.format = 'jpeg'
+        msg.data = cv2.imencode('.jpg', image, [cv2.IMWRITE_JPEG_QUALITY, 80])[1].tobytes()
+        return msg
+
+    return rospy.Publisher('~debug_image/compressed', CompressedImage, queue_size=1), message
