@@ -54,5 +54,6 @@ def test_prefetch_passes_a_read_error_to_the_loop():
 def test_release_stops_a_reader_that_is_ahead():
     source = Prefetch(ListSource(numbered(1000)), depth=2)
     source.read()
+    assert 'prefetch' in [t.name for t in threading.enumerate()]
     source.release()
-    assert not source._thread.is_alive()
+    assert 'prefetch' not in [t.name for t in threading.enumerate()]

@@ -74,7 +74,7 @@ def test_one_command_per_frame_at_4hz_then_a_zero():
     assert all(topic == '/mobile_base/commands/velocity' for _, topic, _ in ros.published)
 
 
-def test_every_branch_keeps_the_pace(monkeypatch):
+def test_every_branch_keeps_the_pace():
     # left, right, straight and none in turn: the lecture slept only after straight
     decisions = iter(['left', 'right', 'straight', 'none'] * 2)
     ros, follower = make(ListSource(blank_frames(8)),
