@@ -296,15 +296,24 @@ class RealRos:
         return received
 
 
-def master_figures(world, commands, received, watch):
-    """What the subscriber got, and how the node behaved while the master was gone."""
+def master_figures(world, source, received, watch):
+    """What the subscriber got, and how the node behaved while the master was gone.
+
+    Driving again after the master's return is timed only where no camera fault (an outage
+    or a covered camera, which stop the robot by themselves) fell between the return and the
+    first move; those restarts are counted apart."""
+    commands = source.commands
     grace = watch.period + watch.timeout  # the master watch notices within this
-    back_to_driving = []
+    back_to_driving, other_fault = [], 0
     for i, (_, back) in enumerate(world.outages):
         later = world.outages[i + 1][0] if i + 1 < len(world.outages) else math.inf
         moves = [t for t, x, z in commands if back < t < later and (x != 0.0 or z != 0.0)]
-        if moves:
-            back_to_driving.append(moves[0] - back)
+        if not moves:
+            continue
+        if any(a < moves[0] and b > back for a, b in source.outages + source.covered):
+            other_fault += 1
+            continue
+        back_to_driving.append(moves[0] - back)
     times = np.array([t for t, _, _ in received])
     return dict(
         master_restarts=len(world.outages),
@@ -315,7 +324,7 @@ def master_figures(world, commands, received, watch):
         driving_again_after_master_s=dict(
             median=round(float(np.median(back_to_driving)), 2) if back_to_driving else None,
             max=round(max(back_to_driving), 2) if back_to_driving else None,
-            restarts=len(back_to_driving)),
+            restarts=len(back_to_driving), camera_fault_meanwhile=other_fault),
         received=len(received),
         not_received=len(commands) - len(received),
         longest_gap_received_s=round(float(np.diff(times).max()), 3) if len(times) > 1 else None,
@@ -380,7 +389,7 @@ def soak(track='oval', controller='improved', frames=10000, seed=0, progress=Tru
         rss_growth_mb=round(source.rss.get(frames, math.nan) - source.rss.get(1000, math.nan),
                             2))
     if real_ros:
-        result.update(master_figures(world, source.commands, received, watch))
+        result.update(master_figures(world, source, received, watch))
     return result
 
 
