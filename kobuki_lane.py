@@ -198,7 +198,7 @@ def make_controller(name, params, camera=LECTURE_CAMERA, improved=None, pipeline
         return LectureRule(params, camera, slides_pipeline(params) if pipeline == 'slides'
                            else None)
     if name == 'improved':
-        return ImprovedController(params, detect, improved, camera)
+        return ImprovedController(params, improved, camera)
     raise ValueError(f"controller must be lecture or improved, not '{name}'")
 
 
@@ -337,8 +337,8 @@ def build_parser():
                     help='camera index, video file, folder of images (name order), '
                          "image pattern like 'frames/%%04d.png', or URL (default: 0)")
     io.add_argument('--calibration', default='lecture',
-                    help="'lecture' (the lecture's camera matrix, default), 'none', or a ROS "
-                         'camera_info YAML path')
+                    help="'lecture' (the lecture's camera matrix, default), 'duckiebot' "
+                         "(Duckietown's default camera), 'none', or a ROS camera_info YAML path")
     io.add_argument('--dry-run', action='store_true',
                     help='no ROS: record the commands instead of publishing them; over files '
                          'this runs as fast as it can')
@@ -430,7 +430,7 @@ def settings_from(args, get_param):
     return params, safety, name, improved
 
 
-def open_outputs(args, params, ros, source):
+def open_outputs(args, params, ros, source, controller):
     bag = None
     if args.bag:  # the one output that can still be refused: before any other is opened
         from lanelib.bags import BagError, BagRecorder
@@ -445,7 +445,8 @@ def open_outputs(args, params, ros, source):
     video = VideoSink(args.video, params.rate) if args.video else None
     debug = None if args.dry_run else debug_publisher(ros)
     return Outputs(params, decisions, video, args.stages, bag, debug, args.show,
-                   Progress(source.total, show_progress))
+                   Progress(source.total, show_progress), getattr(controller, 'draw', None),
+                   getattr(controller, 'pictures', None))
 
 
 def main(argv=None, make_controller=make_controller):
@@ -468,15 +469,18 @@ def main(argv=None, make_controller=make_controller):
         source = open_source(args.source, warn=ros.logwarn, image_topic=args.image_topic)
     except SourceError as e:
         fail(PROG, str(e))
-    outputs = open_outputs(args, params, ros, source)
+    outputs = open_outputs(args, params, ros, source, controller)
     base = SafeBase(ros, twist_type, safety, record=outputs.bag and outputs.bag.twist)
     # last, so that no early exit leaves its thread inside OpenCV (that aborts the process)
     if not source.live:
         source = Prefetch(source)  # decode the next frames on the second core
     follower = LaneFollower(ros, source, controller, base, outputs, params.rate)
     install_signal_handlers(follower.request_stop)
-    ros.loginfo('kobuki_lane: source %s, %s controller, algorithm %s, calibration %s, %.1f Hz '
-                'on %s%s', source.name, controller.name, params.algorithm, args.calibration,
+    lane = getattr(controller, 'profile', None)
+    ros.loginfo('kobuki_lane: source %s, %s controller%s, algorithm %s, calibration %s, %.1f Hz '
+                'on %s%s', source.name, controller.name,
+                f' (lane {lane.name}, {controller.p.lane_width:g} m)' if lane else '',
+                params.algorithm, args.calibration,
                 params.rate, VELOCITY_TOPIC, ' (dry run)' if args.dry_run else '')
     watch = None if args.dry_run else MasterWatch(base, ros).start()
     start = time.monotonic()

@@ -2,7 +2,7 @@
 """Drive a simulated Kobuki round a taped track with kobuki_lane's real loop.
 
 The simulator is the loop's frame source: each read renders the onboard camera view (the
-lecture's camera matrix and distortion, the track's mounting) from the robot's pose, after
+world's camera, the track's mounting) from the robot's pose, after
 moving the robot up to the current simulated time with the Twists the loop published, which
 reach it through the headless rospy stand-in. One frame per loop iteration at 4 Hz, as on the
 robot; nothing sleeps, and a run is deterministic for a given seed.
@@ -11,16 +11,27 @@ The base is Kobuki-like: unicycle kinematics, |linear.x| <= 0.7 m/s, |angular.z|
 an optional acceleration limit, commands reaching the wheels --latency seconds after they are
 published, and the driver's timeout: no command for 0.6 s and the base stops.
 
+Worlds (--world, or world: in the track file) are what the floor looks like: lecture (grey tape
+on a grey floor, the lecture's level webcam), wood (white tape on wood planks, light and
+shadows, a warm cast, a webcam pitched 15 degrees), duckietown (a two-lane road on foam mats:
+yellow dashed centre line, white edges, red stop lines, a Duckiebot-like wide camera 0.1 m up
+pitched 20 degrees) and autorace (yellow and white solid lines, TurtleBot3 AutoRace's lane).
+The improved controller is given the world's lane profile (lanelib/lanes.py).
+
 usage:
     python simulate.py --track lecture --controller improved --json out.json --plot out.png
+    python simulate.py --track s_bend --world duckietown --controller improved --video run.avi
     python simulate.py --track my_track.yaml --controller lecture --video run.avi
-    python simulate.py --benchmark                     every built-in track x both controllers
-    python simulate.py --list-tracks
+    python simulate.py --benchmark                     every built-in track and world
+    python simulate.py --list-tracks                   the built-in tracks and worlds
 
 A run ends when the robot completes the track, departs the lane (its centre more than half a
 lane width from the centre line; --continue drives on), stalls (no progress for 30 s), or
 reaches --time-limit. Built-in tracks: lecture (A straight, B left, C right), oval, s_bend,
-tight. Track files: see tracks.py.
+tight. Track files: see lanelib/sim/tracks.py.
+
+exit status: 0 the run completed (--benchmark: every improved-controller run completed), 1 it
+did not (a departure, a stall, the time limit), 2 bad arguments or track file.
 """
 
 import argparse
@@ -31,7 +42,7 @@ import sys
 import cv2
 
 from kobuki_lane import LaneFollower, LaneParams, make_controller
-from lanelib.camera import LECTURE_CAMERA
+from lanelib.camera import CAMERAS
 from lanelib.cli import check_output, fail
 from lanelib.outputs import Outputs
 from lanelib.rospy_standin import SimClock, StandInRospy, Twist
@@ -45,7 +56,8 @@ from lanelib.sim.simulator import (
     apply_variant,
     improved_params,
 )
-from lanelib.sim.tracks import BUILTIN, TrackError, load_track
+from lanelib.sim.tracks import BUILTIN, TrackError, load_track, with_world
+from lanelib.sim.world import WORLDS
 
 PROG = 'simulate.py'
 
@@ -53,8 +65,9 @@ PROG = 'simulate.py'
 # ---------------------------------------------------------------- runs
 
 def controller_for(name, spec, params):
-    """kobuki_lane's controller; the improved one is told the track's mounting and lane."""
-    return make_controller(name, params, LECTURE_CAMERA,
+    """kobuki_lane's controller, told the track's camera; the improved one also its mounting
+    and lane."""
+    return make_controller(name, params, CAMERAS[spec.camera],
                            improved_params(spec) if name == 'improved' else None)
 
 
@@ -69,8 +82,10 @@ def run(spec, controller='lecture', seed=0, video=None, plot=None, time_limit=No
     params = LaneParams()
     topdown = TopDown(sim) if (video or plot) else None
     sink = SideBySide(video, params.rate, topdown) if video else None
-    follower = LaneFollower(ros, sim, controller_factory(controller, spec, params),
-                            SafeBase(ros, Twist), Outputs(params, video=sink), params.rate)
+    ctl = controller_factory(controller, spec, params)
+    follower = LaneFollower(ros, sim, ctl, SafeBase(ros, Twist),
+                            Outputs(params, video=sink, draw=getattr(ctl, 'draw', None)),
+                            params.rate)
     try:
         follower.run()
     finally:
@@ -91,16 +106,21 @@ def run(spec, controller='lecture', seed=0, video=None, plot=None, time_limit=No
 # ---------------------------------------------------------------- command line
 
 def _bench_job(job):
-    track, controller, variant, seed = job
-    result = run(apply_variant(load_track(track), variant), controller, seed=seed)
+    track, world, controller, variant, seed = job
+    spec = apply_variant(with_world(load_track(track), WORLDS[world]), variant)
+    result = run(spec, controller, seed=seed)
     result['variant'] = variant
     return result
 
 
-def benchmark(jobs=2, seed=0, stream=None):
-    """Every built-in track x both controllers, and the improved one under each condition."""
-    work = [(t, c, 'clean', seed) for t in BUILTIN for c in ('lecture', 'improved')]
-    work += [(t, 'improved', v, seed) for v in VARIANTS if v != 'clean' for t in BUILTIN]
+def benchmark(jobs=2, seed=0, stream=None, worlds=None):
+    """Every built-in track x both controllers in the lecture's world, and the improved one in
+    every world (with that world's lane profile) under each condition."""
+    worlds = list(worlds or WORLDS)
+    work = [(t, 'lecture', c, 'clean', seed) for t in BUILTIN for c in ('lecture', 'improved')
+            if 'lecture' in worlds]
+    work += [(t, w, 'improved', v, seed) for w in worlds for v in VARIANTS
+             for t in BUILTIN if (w, v) != ('lecture', 'clean')]
     if jobs > 1:
         from multiprocessing import Pool
 
@@ -113,11 +133,11 @@ def benchmark(jobs=2, seed=0, stream=None):
 
 
 def benchmark_table(results):
-    rows = ['| track | controller | condition | completed | progress | RMS offset | max offset '
-            '| mean speed | departures | ended |',
-            '|---|---|---|---|---|---|---|---|---|---|']
+    rows = ['| world | track | controller | condition | completed | progress | RMS offset | '
+            'max offset | mean speed | departures | ended |',
+            '|---|---|---|---|---|---|---|---|---|---|---|']
     for r in results:
-        rows.append(f"| {r['track']} | {r['controller']} | {r['variant']} | "
+        rows.append(f"| {r['world']} | {r['track']} | {r['controller']} | {r['variant']} | "
                     f"{'yes' if r['completed'] else 'no'} | {r['progress']:.0%} | "
                     f"{r['rms_offset_m'] * 100:.1f} cm | {r['max_offset_m'] * 100:.1f} cm | "
                     f"{r['mean_speed_mps']:.3f} m/s | {r['departures']} | {r['ended']} |")
@@ -141,6 +161,8 @@ def build_parser():
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--track', default='lecture',
                         help=f"built-in ({', '.join(BUILTIN)}) or a YAML/JSON file")
+    parser.add_argument('--world', choices=sorted(WORLDS),
+                        help="what the floor looks like (default: the track file's, or lecture)")
     parser.add_argument('--controller', choices=('lecture', 'improved'), default='lecture',
                         help="the lecture's rule (default) or the improved controller")
     parser.add_argument('--seed', type=int, default=0, help='frame noise seed (default 0)')
@@ -172,9 +194,12 @@ def build_parser():
                        help='publish to wheels [s] (default 0.05)')
     bench = parser.add_argument_group('benchmark')
     bench.add_argument('--benchmark', action='store_true',
-                       help='run every built-in track x {lecture, improved}, and the improved '
-                            'controller with noise 10, a lighting gradient and a 20 cm gap; '
-                            'print a Markdown table (--json writes all results)')
+                       help="run every built-in track x {lecture, improved} in the lecture's "
+                            'world, and the improved controller in every world, clean and with '
+                            'noise 10, a lighting gradient and a 20 cm gap; print a Markdown '
+                            'table (--json writes all results)')
+    bench.add_argument('--worlds', nargs='+', choices=sorted(WORLDS), metavar='WORLD',
+                       help='with --benchmark: only these worlds')
     bench.add_argument('--jobs', type=int, default=2, help='parallel runs (default 2)')
     parser.add_argument('--list-tracks', action='store_true', help='list the built-in tracks')
     return parser
@@ -187,6 +212,8 @@ def check_outputs(args):
 
 
 def customise(spec, args):
+    if args.world:
+        spec = with_world(spec, WORLDS[args.world])
     for key in ('noise', 'gradient', 'glare'):
         if getattr(args, key) is not None:
             setattr(spec.scene, key, getattr(args, key))
@@ -214,13 +241,18 @@ def main(argv=None):
             spec = load_track(name)
             print(f'{name}: {spec.track.length:.2f} m, {len(spec.track.segments)} segments'
                   f"{', closed' if spec.closed else ''}")
+        for name, world in WORLDS.items():
+            print(f'world {name}: {world.floor} floor, lane profile {world.lane}, '
+                  f'{world.camera} camera')
         return 0
     if args.benchmark:
-        results = benchmark(max(1, args.jobs), args.seed)
-        if args.json:
-            with open(args.json, 'w', encoding='utf-8') as f:
-                json.dump(results, f, indent=1)
-        return 0
+        results = benchmark(max(1, args.jobs), args.seed, worlds=args.worlds)
+        write_json(args.json, results)
+        failed = [r for r in results if r['controller'] == 'improved' and not r['completed']]
+        if failed:
+            print(f'{PROG}: {len(failed)} improved-controller runs did not complete',
+                  file=sys.stderr)
+        return 1 if failed else 0
     try:
         spec = customise(load_track(args.track), args)
     except TrackError as e:
@@ -234,10 +266,14 @@ def main(argv=None):
           f"{result['time_s']:.1f} s ({result['mean_speed_mps']:.3f} m/s), RMS offset "
           f"{result['rms_offset_m'] * 100:.1f} cm, max {result['max_offset_m'] * 100:.1f} cm, "
           f"departures {result['departures']}")
-    if args.json:
-        with open(args.json, 'w', encoding='utf-8') as f:
-            json.dump(result, f, indent=1)
-    return 0
+    write_json(args.json, result)
+    return 0 if result['completed'] else 1
+
+
+def write_json(path, data):
+    if path:
+        with open(path, 'w', encoding='utf-8') as f:
+            json.dump(data, f, indent=1)
 
 
 if __name__ == '__main__':

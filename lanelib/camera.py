@@ -50,6 +50,20 @@ LECTURE_CAMERA = Camera(
 )
 
 
+# Duckietown's published default camera (duckiefleet calibrations/camera_intrinsic/default.yaml):
+# the Duckiebot's wide-angle 640x480 camera, about 75 degrees vertical field of view.
+DUCKIEBOT_CAMERA = Camera(
+    name='duckiebot',
+    matrix=np.array([[307.7379294605756, 0.0, 329.692367951685],
+                     [0.0, 314.9827773443905, 244.4605588877848],
+                     [0.0, 0.0, 1.0]]),
+    distortion=np.array([-0.2565888993516047, 0.04481160508242147, -0.00505275149956019,
+                         0.001308569367976665, 0.0]),
+    image_size=(640, 480),
+)
+CAMERAS = {'lecture': LECTURE_CAMERA, 'duckiebot': DUCKIEBOT_CAMERA}
+
+
 def undistortion_maps(camera, width, height):
     """The maps cv2.undistort builds on every call, built once for cv2.remap.
 
@@ -63,9 +77,10 @@ def undistortion_maps(camera, width, height):
 
 
 def load_calibration(spec):
-    """'lecture' -> LECTURE_CAMERA, 'none' -> None, anything else -> a camera_info YAML path."""
-    if spec == 'lecture':
-        return LECTURE_CAMERA
+    """'lecture' -> LECTURE_CAMERA, 'duckiebot' -> DUCKIEBOT_CAMERA, 'none' -> None,
+    anything else -> a camera_info YAML path."""
+    if spec in CAMERAS:
+        return CAMERAS[spec]
     if spec == 'none':
         return None
     return read_camera_info(spec)

@@ -51,7 +51,6 @@ class Layout:
         rows = (np.flatnonzero(self.mask.any(axis=1)) if self.mask is not None
                 else np.arange(height))
         self.top, self.bottom = (int(rows[0]), int(rows[-1]) + 1) if rows.size else (0, 0)
-        self.area = cv2.countNonZero(self.mask) if self.mask is not None else width * height
         # an edge pixel depends on the blurred pixels 2 px away (Sobel, then non-maximum
         # suppression) and those on the gray ones blur_kernel // 2 px away
         self.margin = p.blur_kernel // 2 + 3
@@ -157,16 +156,13 @@ class FastPipeline:
     segment (see the module's docstring).
 
     reference: kobuki_lane.detect, for what the band cannot do. mark: called after each stage
-    (tools/bench.py times them). max_edge_fraction: None (the lecture) or a fraction: masks with
-    more edge pixels than that are not read, which bounds Hough's time on dense texture (the
-    improved controller).
+    (tools/bench.py times them).
     """
 
-    def __init__(self, p, reference, mark=None, max_edge_fraction=None):
+    def __init__(self, p, reference, mark=None):
         self.p = p
         self.reference = reference
         self.mark = mark or (lambda stage: None)
-        self.max_edge_fraction = max_edge_fraction
         self._layout = None
 
     def layout(self, width, height, camera, roi):
@@ -177,42 +173,20 @@ class FastPipeline:
     def __call__(self, frame, camera, keep_stages=False, roi=None):
         p, mark = self.p, self.mark
         if keep_stages or p.canny_low != p.canny_high:
-            return self._by_reference(frame, camera, keep_stages, roi)
+            return self.reference(frame, camera, p, keep_stages, roi)
         mark('start')
         raw = as_bgr(frame)
         height, width = raw.shape[:2]
         lay = self.layout(width, height, camera, roi)
         if lay.top == lay.bottom:  # the mask keeps nothing: no segment can be found
-            return self._by_reference(frame, camera, False, roi)
+            return self.reference(frame, camera, p, False, roi)
         band = lay.undistort_band(raw)
         mark('undistort')
-        masked = self.band_edges(band, lay)
-        cluttered = self._cluttered(masked, lay.area)
-        lines = np.empty((0, 4), np.int32) if cluttered else hough_lines(masked, p)
+        lines = hough_lines(self.band_edges(band, lay), p)
         mark('hough')
         slopes = slope_sum(lines, p.slope_min)
         mark('slopes')
-        return Detection(lines, slopes, make_image=lambda: lay.undistort(raw),
-                         cluttered=cluttered)
-
-    def _cluttered(self, masked, area):
-        """More edge pixels in the mask than max_edge_fraction of its area."""
-        return (self.max_edge_fraction is not None and
-                cv2.countNonZero(masked) > self.max_edge_fraction * area)
-
-    def _by_reference(self, frame, camera, keep_stages, roi):
-        """detect() itself, with the clutter bound applied to what it found."""
-        bounded = self.max_edge_fraction is not None
-        detection = self.reference(frame, camera, self.p, keep_stages or bounded, roi)
-        if bounded:
-            masked = detection.stages['masked']
-            area = self.layout(masked.shape[1], masked.shape[0], camera, roi).area
-            if self._cluttered(masked, area):
-                detection.lines, detection.cluttered = np.empty((0, 4), np.int32), True
-                detection.slopes = slope_sum(detection.lines, self.p.slope_min)
-            if not keep_stages:
-                detection.stages = None
-        return detection
+        return Detection(lines, slopes, make_image=lambda: lay.undistort(raw))
 
     def band_edges(self, band, lay):
         """The stages piece by piece (Layout._pieces) on rows lay.first:lay.last: Hough's

@@ -55,3 +55,17 @@ def floor_to_row(distance, matrix, mounting):
     """The undistorted image row where floor `distance` metres ahead of the lens appears."""
     angle = math.atan2(mounting.height, distance) - math.radians(mounting.pitch_deg)
     return matrix[1, 2] + matrix[1, 1] * math.tan(angle)
+
+
+def floor_to_pixels(x, y, matrix, mounting):
+    """Floor points (robot frame) to pixels of the undistorted image: u, v and a mask of the
+    points in front of the camera."""
+    x_cam, y_cam, z_cam = camera_axes(mounting.pitch_deg)
+    rel = np.stack([np.asarray(x, float) - mounting.forward, np.asarray(y, float),
+                    np.full(np.shape(x), -mounting.height)], axis=-1)
+    depth = rel @ z_cam
+    ok = depth > 1e-6
+    depth = np.where(ok, depth, 1.0)
+    u = matrix[0, 0] * (rel @ x_cam) / depth + matrix[0, 2]
+    v = matrix[1, 1] * (rel @ y_cam) / depth + matrix[1, 2]
+    return u, v, ok

@@ -1,20 +1,25 @@
-"""The improved controller: the lane's offset, heading and curvature from the Hough segments
-projected onto the floor, and a PD steering law on them. The lecture's answer to its own
-closing remark: "you have to do continuous estimation of the angle how much to turn".
+"""The improved controller: the lane's offset, heading and curvature from the lines on the
+floor, and a PD steering law on them. The lecture's answer to its own closing remark: "you have
+to do continuous estimation of the angle how much to turn".
 
-Perception uses the lecture's stages (undistort, gray, blur, Canny, mask, HoughLinesP) with
-settings for the floor: the mask is the floor band `roi_near`..`roi_far` metres ahead given
-by the camera model, and Hough accepts shorter segments. Each segment is projected onto the
-floor (camera matrix + mounting), sorted to the left or right line by which side of the
-predicted centre line it lies, shifted half a lane width towards the centre, and a centre line
-y = a + b x + c x^2 (robot frame: x ahead, y left) is fitted to all of it. One line is enough,
-since the lane width is known. The fit is blended over time with a prediction from the
-commanded motion, weighted by a confidence. No lane for `lost_timeout` seconds: stop.
+Perception looks at the floor band `roi_near`..`roi_far` metres ahead (from the camera model),
+undistorted the fast pipeline's way. The lane profile (`lane`, lanelib/lanes.py) says what
+its lines look like: their colours (white, yellow, or any colour lighter than the floor) and
+the tapes' width. Pixels of those colours, judged in the light of each frame
+(lanelib/colour.py), are cut into nearly straight pieces and projected onto the floor (camera
+matrix + mounting); a piece not as wide as the tape is not a line (a seam, a glint, a sheet of
+paper), nor is red (stop lines). lanelib/lanefit.py then chooses, among all the lines in view,
+the robot's own lane, the one whose left and right lines the pieces best support with the
+colours allowed on each side (a neighbouring lane, a centre line being crossed, the other
+colour on a side are not its lines), as an arc (a Duckietown bend turns 90 degrees within half
+a metre). One line is enough, since the lane width is known. The estimate is blended over time
+with a prediction from the commanded motion, weighted by a confidence. No lane for
+`lost_timeout` seconds: stop.
 
 Lane memory (`memory` seconds, 0 for none): the camera sees the floor from about 0.6 m ahead,
 so the lane between the robot and there is only known from earlier frames. The centre-line
 points of each frame are kept in the frame the robot started in, moved by dead reckoning on the
-commanded motion; they sort the next frame's segments to left and right (where the latest
+commanded motion; they guide the next frame's choice of lane (where the latest
 estimate, extrapolated, can be a lane off at a gap or an S-bend), and steering looks at the
 remembered centre line `memory_lookahead` ahead instead of the latest fit. With too little
 remembered there (the first frames) it steers on the latest estimate as below. The robot still
@@ -39,10 +44,21 @@ import cv2
 import numpy as np
 
 from lanelib.camera import LECTURE_CAMERA, undistortion_maps
-from lanelib.fast import FastPipeline
-from lanelib.geometry import Mounting, floor_to_row, pixels_to_floor
+from lanelib.colour import colour_masks, tape_pieces, view_sides
+from lanelib.fast import Layout
+from lanelib.geometry import Mounting, floor_to_pixels, floor_to_row
+from lanelib.lanefit import LaneFit, find_lane
+from lanelib.lanes import load_lane
+from lanelib.outputs import draw_curve, text_band, tint
 from lanelib.robot import STOP, Command, arc_step
 from lanelib.settings import finite, fraction, non_negative, positive, setting
+from lanelib.stages import Detection, as_bgr, slope_sum
+
+
+def lane_spec(spec):
+    """A lane profile that loads; lanes.LaneError (a ValueError) says why not."""
+    load_lane(spec)
+    return True
 
 
 @dataclass
@@ -54,24 +70,22 @@ class ImprovedParams:
                                   finite)
     camera_forward: float = setting(0.10, 'camera lens ahead of the robot centre', 'm',
                                     finite)
-    lane_width: float = setting(0.35, 'between the tape centres', 'm', positive)
+    lane: str = setting('lecture', 'what the lane looks like: lecture (two tapes of any colour, '
+                        '0.35 m), duckietown (yellow dashed left, white right), autorace (yellow '
+                        'left, white right), or a lane profile YAML (lanelib/lanes.py)',
+                        check=lane_spec)
+    lane_width: float = setting(0.0, "between the tape centres; 0: the lane profile's", 'm',
+                                non_negative)
+    width_tolerance: float = setting(0.3, 'with both lines in view, the width between them is '
+                                     'measured, within this fraction of lane_width (a camera '
+                                     'pitched a little off makes them look further apart or '
+                                     'closer); 0: always lane_width', '', fraction)
     roi_near: float = setting(0.3, 'floor mask starts this far ahead (clipped to the view)', 'm',
                               positive)
     roi_far: float = setting(1.2, 'floor mask ends this far ahead', 'm', positive)
-    hough_rho_improved: float = setting(2.0, 'HoughLinesP rho for the improved perception',
-                                        'px', positive)
-    hough_threshold_improved: int = setting(30, 'HoughLinesP votes for the improved perception',
-                                            'votes', positive)
-    min_line_length_improved: float = setting(20.0, 'HoughLinesP minLineLength, improved', 'px',
-                                              finite)
-    max_line_gap_improved: float = setting(10.0, 'HoughLinesP maxLineGap, improved', 'px',
-                                           finite)
-    max_edge_fraction: float = setting(0.15, 'a frame whose floor mask is more than this '
-                                       'fraction edge pixels (dense texture) is not read: Hough '
-                                       'is skipped, which bounds the time per frame', '',
-                                       fraction)
-    max_segments: int = setting(60, 'at most this many segments used per frame (the longest); '
-                                'bounds the work on cluttered frames', '', positive)
+    max_pieces: int = setting(60, 'at most this many pieces of line used per frame (the '
+                              'longest); bounds the work on cluttered frames, which are marked '
+                              "'cluttered' in the decision records", '', positive)
     smoothing: float = setting(0.6, 'weight of a full-confidence measurement against the '
                                'prediction', '', fraction)
     lost_timeout: float = setting(1.0, 'stop when no lane has been seen for this long', 's',
@@ -96,8 +110,11 @@ class ImprovedParams:
                                       'this far ahead', 'm', positive)
     memory_window: float = setting(0.25, 'with memory: fit the points this far either side of '
                                    'the look-ahead', 'm', positive)
-    dead_band: float = setting(0.05, "angular.z within this is recorded as 'straight'", 'rad/s',
-                               finite)
+    turn_offset: float = setting(0.5, "the decision recorded: 'left' or 'right' when the lane's "
+                                 'centre lies more than this many lane widths to that side at '
+                                 'the look-ahead distance (going straight, the robot would be '
+                                 "out of its lane there), 'straight' otherwise", 'lane widths',
+                                 positive)
 
     @property
     def mounting(self):
@@ -114,6 +131,7 @@ class LaneEstimate:
     right: int = 0  # segments on the right line
     reach: float = 1.0  # [m] mean distance ahead of the points the fit rests on
     points: tuple = None  # the centre-line points the fit rests on: x, y, weight (robot frame)
+    width: float = None  # [m] between the lines, as measured
 
     @property
     def offset(self):  # robot left of the lane centre [m]
@@ -126,6 +144,12 @@ class LaneEstimate:
     @property
     def curvature(self):  # the lane bends left [1/m]
         return 2 * self.c / (1 + self.b ** 2) ** 1.5
+
+    def lateral_at(self, distance):
+        """How far to the left [m] the centre line lies `distance` metres from the robot,
+        following it as the arc it starts as (a polynomial in x cannot turn 90 degrees)."""
+        return LaneFit((self.a, math.atan(self.b), self.curvature), None, 0, 0,
+                       None).point_at(distance)[1]
 
 
 def floor_roi(width, height, p, camera=None, margin=4):
@@ -146,80 +170,49 @@ def floor_roi(width, height, p, camera=None, margin=4):
     return mask
 
 
-def floor_segments(lines, matrix, p):
-    """Segments projected onto the floor, sampled every 5 cm: a list of (x, y, weight, phi)."""
-    lines = np.asarray(lines, float).reshape(-1, 4)
-    if len(lines) == 0:
-        return []
-    lengths = np.hypot(lines[:, 2] - lines[:, 0], lines[:, 3] - lines[:, 1])
-    lines = lines[np.argsort(-lengths)[:p.max_segments]]
-    x, y, ok = pixels_to_floor(lines.reshape(-1, 2, 2), matrix, p.mounting)
-    keep = ok.all(axis=1) & (x.max(axis=1) < p.roi_far + 1.0)
-    out = []
-    for (x0, x1), (y0, y1) in zip(x[keep], y[keep]):
-        if x1 < x0:  # direction ambiguity: make every segment point ahead
-            x0, x1, y0, y1 = x1, x0, y1, y0
-        length, phi = math.hypot(x1 - x0, y1 - y0), math.atan2(y1 - y0, x1 - x0)
-        if length < 0.04 or abs(phi) > math.radians(70):
-            continue
-        t = np.linspace(0.0, 1.0, max(2, int(length / 0.05) + 1))
-        out.append((x0 + t * (x1 - x0), y0 + t * (y1 - y0), length / len(t), phi))
-    return out
+def arc_points(est, lengths, offset=0.0):
+    """Points (x, y) of the estimate's centre line, as the arc it starts as, at arc lengths
+    `lengths`, moved `offset` [m] to its left."""
+    psi, k = math.atan(est.b), est.curvature
+    h = psi + k * lengths
+    if abs(k) < 1e-4:
+        x, y = lengths * math.cos(psi), est.a + lengths * math.sin(psi)
+    else:
+        x = (np.sin(h) - math.sin(psi)) / k
+        y = est.a + (math.cos(psi) - np.cos(h)) / k
+    return x - offset * np.sin(h), y + offset * np.cos(h)
 
 
-def fit_sides(segments, guess, half):
-    """Sort segments to the left or right line of the centre line `guess` (a, b, c), move
-    them half a lane towards the centre, refit; a few rounds. Returns (a, b, c), the sides
-    and the weighted mean squared misfit of the lines to the fit."""
-    a, b, c = guess
-    w = np.concatenate([np.full(len(sx), wt) for sx, _, wt, _ in segments])
-    for _ in range(4):
-        sides = np.array([1.0 if np.mean(sy - (a + b * sx + c * sx ** 2)) > 0 else -1.0
-                          for sx, sy, _, _ in segments])
-        cx = np.concatenate([sx + side * half * math.sin(phi)
-                             for (sx, _, _, phi), side in zip(segments, sides)])
-        cy = np.concatenate([sy - side * half * math.cos(phi)
-                             for (_, sy, _, phi), side in zip(segments, sides)])
-        a, b, c = fit_centre(cx, cy, w)
-    misfit = float(np.sum(w * (cy - (a + b * cx + c * cx ** 2)) ** 2) / w.sum())
-    return (a, b, c), sides, misfit, (cx, cy, w)
+def measure_lane(pieces, profile, p, prior=None):
+    """One frame's LaneEstimate from pieces of line with their colours (lanefit.find_lane),
+    or None when less than a quarter lane width's length of the lane's lines is seen or the
+    robot would be more than half a lane outside the lane found; and the lanefit.LaneFit it
+    rests on (or None)."""
+    guide = None if prior is None else (prior.a, math.atan(prior.b), prior.curvature)
+    fit = find_lane(pieces, profile, p.lane_width, guide, width_tolerance=p.width_tolerance)
+    if fit is None or fit.left + fit.right < 0.25 * p.lane_width or abs(fit.e) > fit.width:
+        # too little line seen, or a lane the robot would be more than half a lane outside:
+        # not the robot's lane
+        return None, fit
+    b = math.tan(fit.psi)
+    confidence = (min(1.0, (fit.left + fit.right) / (2.9 * p.lane_width)) *
+                  (1.0 if fit.left and fit.right else 0.7))
+    cx, _, cw = fit.centre
+    return LaneEstimate(fit.e, b, fit.k * (1 + b * b) ** 1.5 / 2, confidence,
+                        int(np.sum(fit.sides == 1)), int(np.sum(fit.sides == -1)),
+                        float(np.average(cx, weights=cw)), fit.centre, fit.width), fit
 
 
-def measure(lines, matrix, p, prior=None):
-    """One frame's LaneEstimate from its segments, or None when they show no lane."""
-    segments = floor_segments(lines, matrix, p)
-    if not segments:
-        return None
-    guesses = [(0.0, 0.0, 0.0), (0.0, 0.0, 0.4), (0.0, 0.0, -0.4)]
-    if prior is not None:
-        guesses.insert(0, (prior.a, prior.b, prior.c))
-    half = p.lane_width / 2
-    fits = [fit_sides(segments, g, half) for g in guesses]
-
-    def score(i):
-        (a, _, _), _, misfit, _ = fits[i]
-        if prior is not None:  # the prediction wins unless a guess explains the lines better
-            return misfit * (0.5 if i == 0 else 1.0)
-        # with no history, one line fits as well on either side: take the robot in its lane
-        return misfit + max(0.0, abs(a) - half) ** 2
-
-    best = min(range(len(fits)), key=score)
-    (a, b, c), sides, _, points = fits[best]
-    total = sum(len(sx) * wt for sx, _, wt, _ in segments)
-    left, right = int(np.sum(sides > 0)), int(np.sum(sides < 0))
-    confidence = min(1.0, total / 1.0) * (1.0 if left and right else 0.7)
-    reach = sum(float(np.sum(sx)) * wt for sx, _, wt, _ in segments) / total
-    return LaneEstimate(a, b, c, confidence, left, right, reach, points)
-
-
-def fit_centre(x, y, w, ridge=0.05):
-    """Weighted least squares y = a + b x + c x^2, with c pulled towards 0 on short spans."""
-    columns = [np.ones_like(x), x, x ** 2]
-    A = np.stack(columns, axis=1) * np.sqrt(w)[:, None]
-    rhs = y * np.sqrt(w)
+def fit_centre(x, y, w, ridge=0.05, x0=0.0):
+    """Weighted least squares y = a + b x + c x^2, with c pulled towards 0 on short spans.
+    The pull acts on the curve written about x0 (put x0 amid the points): there a and b are
+    what the points say, whatever becomes of c (written about 0, pulling c on a short span far
+    ahead would tilt the line instead of bending it)."""
+    u = x - x0
+    A = np.stack([np.ones_like(u), u, u ** 2], axis=1) * np.sqrt(w)[:, None]
     reg = np.diag([0.0, 1e-4, ridge]) * w.sum()
-    coef = np.linalg.solve(A.T @ A + reg, A.T @ rhs)
-    return float(coef[0]), float(coef[1]), float(coef[2])
+    a, b, c = np.linalg.solve(A.T @ A + reg, A.T @ (y * np.sqrt(w)))
+    return float(a - b * x0 + c * x0 ** 2), float(b - 2 * c * x0), float(c)
 
 
 def predict(est, v, omega, dt):
@@ -234,21 +227,22 @@ def blend(pred, meas, weight):
     return LaneEstimate(pred.a + weight * (meas.a - pred.a), pred.b + weight * (meas.b - pred.b),
                         pred.c + weight * (meas.c - pred.c),
                         pred.confidence + weight * (meas.confidence - pred.confidence),
-                        meas.left, meas.right, meas.reach)
+                        meas.left, meas.right, meas.reach, width=meas.width)
 
 
 def steer(est, p):
-    """(linear.x, angular.z) for a lane estimate: PD at the look-ahead, see the module doc."""
+    """(linear.x, angular.z, y) for a lane estimate: PD at the look-ahead (see the module
+    doc); y [m] is where the centre line lies, to the left, at the point steered at."""
     x = float(np.clip(est.reach, p.lookahead_min, p.lookahead))
     return drive(est.a + est.b * x + est.c * x ** 2, est.b + 2 * est.c * x, x, est, p)
 
 
 def drive(y, slope, x, est, p):
-    """(linear.x, angular.z) towards the centre line at y with `slope`, x metres ahead."""
+    """(linear.x, angular.z, y) towards the centre line at y with `slope`, x metres ahead."""
     k = p.lateral_gain * 2 * y / x ** 2 + (1 - p.lateral_gain) * slope / x  # [1/m]
     v = p.v_max / (1 + p.curve_slowdown * abs(k)) * (0.5 + 0.5 * est.confidence)
     v = float(np.clip(v, p.v_min, p.v_max))
-    return v, float(np.clip(v * k, -p.omega_max, p.omega_max))
+    return v, float(np.clip(v * k, -p.omega_max, p.omega_max)), y
 
 
 class LaneMemory:
@@ -295,18 +289,18 @@ class LaneMemory:
         keep = (x > near) & (x < far)
         if np.count_nonzero(keep) < 6 or np.ptp(x[keep]) < min_span:
             return None
-        x, y, w = x[keep], y[keep], w[keep]
-        coef = fit_centre(x, y, w)
+        x, y, w, middle = x[keep], y[keep], w[keep], (near + far) / 2
+        coef = fit_centre(x, y, w, x0=middle)
         for _ in range(2 if outlier else 0):
             keep = np.abs(y - (coef[0] + coef[1] * x + coef[2] * x ** 2)) < outlier
             if np.count_nonzero(keep) < 6:
                 break
-            coef = fit_centre(x[keep], y[keep], w[keep])
+            coef = fit_centre(x[keep], y[keep], w[keep], x0=middle)
         return coef
 
 
 def steer_memory(memory, est, p):
-    """(linear.x, angular.z) from the remembered centre line around p.memory_lookahead, or
+    """(linear.x, angular.z, y) from the remembered centre line around p.memory_lookahead, or
     None when too little of it is remembered there."""
     L, half = p.memory_lookahead, p.memory_window
     coef = memory.centre_line(L - half, L + half, half, outlier=0.08)
@@ -319,31 +313,49 @@ def steer_memory(memory, est, p):
 class ImprovedController:
     """Perceive -> estimate -> steer, one frame at a time; drop-in for kobuki_lane.LectureRule.
 
-    lane_params: the lecture's settings (blur, Canny, rate); reference: kobuki_lane.detect,
-    which the fast pipeline hands what it cannot speed up; p: ImprovedParams; camera: the
-    calibration (None: frames as they come, with the lecture camera's geometry scaled to them).
+    lane_params: the lecture's settings (its rate); p: ImprovedParams; camera: the calibration
+    (None: frames as they come, with the lecture camera's geometry scaled to them); profile: a
+    lanes.LaneProfile instead of the one p.lane names; mark: called with each stage's name as
+    it ends ('start', 'undistort', 'colour', 'pieces', then 'lane' and 'steer' in the call),
+    for tools/bench.py.
     """
 
     name = 'improved'
 
-    def __init__(self, lane_params, reference, p=None, camera=LECTURE_CAMERA):
-        self.p = p or ImprovedParams()
+    def __init__(self, lane_params, p=None, camera=LECTURE_CAMERA, profile=None,
+                 mark=None):
+        p = p or ImprovedParams()
+        self.mark = mark or (lambda stage: None)
+        self.profile = profile or load_lane(p.lane)
+        # the lane width: the profile's, unless given
+        self.p = replace(p, lane_width=p.lane_width or self.profile.lane_width)
+        # lines are cut into pieces this long [m]: a quarter lane, and three times as long as
+        # the widest tape is wide, so that a piece's direction is along the line
+        self.piece_length = max(0.25 * self.p.lane_width,
+                                3 * max(self.profile.left.width, self.profile.right.width))
         self.camera = camera
         self.dt = 1.0 / lane_params.rate
-        self.detect_params = replace(  # the lecture's blur and Canny settings stay
-            lane_params, hough_rho=self.p.hough_rho_improved, hough_theta=math.pi / 180,
-            hough_threshold=self.p.hough_threshold_improved,
-            min_line_length=self.p.min_line_length_improved,
-            max_line_gap=self.p.max_line_gap_improved)
-        self.estimate = None
-        self.lost_for = math.inf  # [s] since the lane was last seen
-        self.last = (0.0, 0.0)  # the last command (v, omega)
-        self.cluttered = False  # the last frame had too many edges to read
+        self.cluttered = False  # the last frame had more than max_pieces pieces of line
+        self.last_sides = None  # the side of each piece of the last frame (pictures)
         self.matrix = None  # the undistorted frame's camera matrix
         self._roi = {}  # mask per (camera, width, height)
-        self.pipeline = FastPipeline(self.detect_params, reference,
-                                     max_edge_fraction=self.p.max_edge_fraction)
+        self.lane_params = lane_params
+        self._layout = None  # the floor band's undistortion, the fast pipeline's way
+        # the estimate, the time since the lane was last seen [s], the last command (v, omega)
+        # and the lane memory
+        self.reset()
+
+    def reset(self):
+        """Forget the lane: the next frame is read as if it were the first."""
+        self.estimate, self.lost_for, self.last = None, math.inf, (0.0, 0.0)
         self.memory = LaneMemory(self.p.memory) if self.p.memory > 0 else None
+
+    def layout(self, width, height, roi):
+        """fast.Layout of the floor band: undistortion maps made once, only its rows done."""
+        lay = self._layout
+        if lay is None or not lay.matches(width, height, self.camera, roi, self.lane_params):
+            self._layout = Layout(width, height, self.camera, roi, self.lane_params)
+        return self._layout
 
     def roi(self, width, height):
         """The floor band's mask for this camera and frame size."""
@@ -356,7 +368,43 @@ class ImprovedController:
         h, w = frame.shape[:2]
         # with no calibration the pixels are taken as the lecture camera's, scaled to the frame
         self.matrix = (self.camera or LECTURE_CAMERA).scaled_to(w, h).matrix
-        return self.pipeline(frame, self.camera, keep_stages, roi=self.roi(w, h))
+        detection = Detection(np.empty((0, 4), np.int32), slope_sum(np.empty((0, 4))))
+        self.colour_pieces(frame, self.roi(w, h), detection, keep_stages)
+        return detection
+
+    def colour_pieces(self, frame, roi, detection, keep_stages):
+        """The colour masks of the floor band and the tape pieces they hold, on the detection
+        (detection.pieces, detection.masks: the band's masks and its first row)."""
+        h, w = frame.shape[:2]
+        self.mark('start')
+        raw = as_bgr(frame)
+        lay = self.layout(w, h, roi)
+        if keep_stages or lay.maps is None or not roi.any():  # (no floor in view: no band)
+            image = lay.undistort(raw)
+            first, band = 0, image
+            if detection.image is None:
+                detection.set_image(image)
+            if keep_stages and detection.stages is None:
+                detection.stages = dict(raw=raw, undistorted=image)
+        else:
+            first, band = lay.first, cv2.cvtColor(lay.undistort_band(raw), cv2.COLOR_BGRA2BGR)
+            if detection.image is None:
+                detection.set_image(None, lambda: lay.undistort(raw))
+        floor = roi[first:first + len(band)]
+        self.mark('undistort')
+        masks = colour_masks(band, floor)
+        self.mark('colour')
+        p, pieces, side = self.p, [], view_sides(floor)
+        for colour in self.profile.colours:
+            tape = max(line.width for line in (self.profile.left, self.profile.right)
+                       if line.colour == colour)
+            pieces += tape_pieces(cv2.bitwise_and(masks[colour], floor), colour, self.matrix,
+                                  p.mounting, tape, 0.1 * p.lane_width, self.piece_length,
+                                  row0=first, side=side)
+        pieces.sort(key=lambda piece: -piece.length)
+        detection.cluttered = len(pieces) > p.max_pieces
+        detection.pieces, detection.masks = pieces[:p.max_pieces], (masks, first)
+        self.mark('pieces')
 
     def __call__(self, detection):
         p = self.p
@@ -368,7 +416,9 @@ class ImprovedController:
             remembered = self.memory.centre_line(0.2, 1.2, 0.3)
             if remembered is not None and prior is not None:
                 guide = replace(prior, a=remembered[0], b=remembered[1], c=remembered[2])
-        meas = measure(detection.lines, self.matrix, p, guide)
+        meas, fit = measure_lane(detection.pieces, self.profile, p, guide)
+        self.mark('lane')
+        self.last_sides = None if fit is None else fit.sides
         if meas is not None:
             self.lost_for = 0.0
             self.estimate = blend(prior, meas, p.smoothing * meas.confidence) if prior else meas
@@ -381,20 +431,86 @@ class ImprovedController:
             self.last = (0.0, 0.0)
             if self.memory is not None:
                 self.memory.clear()
+            self.mark('steer')
             return STOP
         steered = steer_memory(self.memory, self.estimate, p) if self.memory else None
-        v, omega = steered or steer(self.estimate, p)
+        v, omega = (steered or steer(self.estimate, p))[:2]
         self.last = (v, omega)
-        decision = ('left' if omega > p.dead_band else
-                    'right' if omega < -p.dead_band else 'straight')
-        return Command(decision, v, omega)
+        self.mark('steer')
+        return Command(self.decision(), v, omega)
+
+    def decision(self):
+        """'left' or 'right' when the lane's centre lies more than turn_offset lane widths to
+        that side at the look-ahead distance (going straight, the robot would be out of its
+        lane there), else 'straight'."""
+        p = self.p
+        y, turn = self.estimate.lateral_at(p.lookahead), p.turn_offset * p.lane_width
+        return 'left' if y > turn else 'right' if y < -turn else 'straight'
+
+    # ---------------------------------------------------------------- pictures
+
+    def draw(self, detection, command, lane_params=None):
+        """The undistorted frame with the colour masks tinted, the lane's centre (green), left
+        (orange) and right (blue) lines on the floor, and what was decided."""
+        masks, first = detection.masks
+        shown = {c: m for c, m in masks.items() if c in self.profile.colours or c == 'red'}
+        image = tint(detection.image, shown, first, alpha=0.35)
+        e, p = self.estimate, self.p
+        if e is not None and self.matrix is not None:
+            s = np.linspace(0.0, p.roi_far, 40)
+            for side, colour in ((0, (0, 255, 0)), (1, (0, 160, 255)), (-1, (255, 128, 0))):
+                x, y = arc_points(e, s, side * p.lane_width / 2)
+                draw_curve(image, x, y, self._to_pixels, colour)
+        text = f'{command.decision}  v {command.linear_x:.2f} w {command.angular_z:+.2f}'
+        if e is not None:
+            text += (f'  offset {100 * e.offset:+.1f} cm  heading '
+                     f'{math.degrees(e.heading):+.1f} deg  curvature {e.curvature:+.2f}/m  '
+                     f'confidence {e.confidence:.2f}')
+        return text_band(image, text)
+
+    def _to_pixels(self, x, y):
+        return floor_to_pixels(x, y, self.matrix, self.p.mounting)
+
+    def pictures(self, detection, command, lane_params=None):
+        """(key, title, BGR image) of every stage: the frame, undistorted, the floor band, each
+        colour mask, the pieces of tape (the lane's by side, the rest grey), the lane."""
+        stages = detection.stages or {}
+        image = detection.image
+        h, w = image.shape[:2]
+        band = image.copy()
+        band[self.roi(w, h) == 0] //= 3
+        out = [('raw', 'raw frame', as_bgr(stages.get('raw', image))),
+               ('undistorted', '1 undistorted', image),
+               ('floor', f'2 floor {self.p.roi_near:g} to {self.p.roi_far:g} m ahead', band)]
+        masks, first = detection.masks
+        for name in self.profile.colours + ['red']:
+            full = np.zeros((h, w), np.uint8)
+            full[first:first + len(masks[name])] = masks[name]
+            out.append((f'mask_{name}', f'3 {name} mask', cv2.cvtColor(full, cv2.COLOR_GRAY2BGR)))
+        out.append(('pieces', "4 tape pieces: the lane's left, right; others grey",
+                    self._pieces_picture(detection, image)))
+        out.append(('lane', '5 the lane, the decision', self.draw(detection, command)))
+        return out
+
+    def _pieces_picture(self, detection, image):
+        picture = (image // 2).copy()
+        sides = self.last_sides if self.last_sides is not None else []
+        colours = {1: (0, 160, 255), -1: (255, 128, 0), 0: (150, 150, 150)}
+        for i, piece in enumerate(detection.pieces):
+            side = int(sides[i]) if i < len(sides) else 0
+            u, v, ok = self._to_pixels(piece.x, piece.y)
+            for a, b in zip(u[ok], v[ok]):
+                cv2.circle(picture, (int(a), int(b)), 2, colours[side], -1)
+        return picture
 
     def extra(self):
         """The estimate, for the decision records."""
         e = self.estimate
         if e is None:
             return dict(offset_m=None, heading_rad=None, curvature=None, confidence=0.0,
-                        lane_lost_s=None, cluttered=self.cluttered)
+                        lane_width_m=None, lane_lost_s=None, cluttered=self.cluttered)
+        width = None if e.width is None or self.lost_for > 0 else round(e.width, 4)
         return dict(offset_m=round(e.offset, 4), heading_rad=round(e.heading, 4),
                     curvature=round(e.curvature, 4), confidence=round(e.confidence, 3),
-                    lane_lost_s=round(min(self.lost_for, 1e6), 3), cluttered=self.cluttered)
+                    lane_width_m=width, lane_lost_s=round(min(self.lost_for, 1e6), 3),
+                    cluttered=self.cluttered)

@@ -30,8 +30,37 @@ def annotate(detection, command, p):
     for x1, y1, x2, y2 in detection.lines.tolist():
         cv2.line(image, (x1, y1), (x2, y2), (0, 255, 0), 2)
     s = detection.slopes
-    text = (f'{command.decision}  theta {s.theta:+.2f}  value {s.value:+.3f}  '
-            f'{len(detection.lines)} lines  v {command.linear_x:.2f} w {command.angular_z:+.2f}')
+    return text_band(image, f'{command.decision}  theta {s.theta:+.2f}  value {s.value:+.3f}  '
+                            f'{len(detection.lines)} lines  v {command.linear_x:.2f} '
+                            f'w {command.angular_z:+.2f}')
+
+
+MASK_TINTS = {'white': (255, 160, 0), 'yellow': (0, 220, 255), 'red': (0, 0, 255),
+              'any': (255, 0, 255)}  # BGR: how each colour mask is shown
+
+
+def tint(image, masks, first=0, alpha=0.6):
+    """The image with each mask's pixels (rows first.. of it) blended towards its tint."""
+    out = image.copy()
+    for name, mask in masks.items():
+        rows = out[first:first + len(mask)]
+        on = mask > 0
+        rows[on] = ((1 - alpha) * rows[on] + alpha * np.array(MASK_TINTS[name])).astype(np.uint8)
+    return out
+
+
+def draw_curve(image, xs, ys, to_pixels, colour, thickness=2):
+    """A curve of floor points (robot frame) drawn onto the undistorted image."""
+    u, v, ok = to_pixels(xs, ys)
+    pts = np.stack([u[ok], v[ok]], axis=1)
+    if len(pts) > 1:
+        cv2.polylines(image, [np.round(pts).astype(np.int32).reshape(-1, 1, 2)], False,
+                      colour, thickness, cv2.LINE_AA)
+
+
+def text_band(image, text):
+    """A black band across the top of the image with `text` on it."""
+    w = image.shape[1]
     scale = max(0.3, w / 1400)
     band = int(28 * scale / 0.45)
     cv2.rectangle(image, (0, 0), (w, band), (0, 0, 0), -1)
@@ -40,12 +69,17 @@ def annotate(detection, command, p):
     return image
 
 
-def stage_pictures(detection, command, p, draw=annotate):
-    """(title, BGR image) for every stage of a detection made with keep_stages=True, ending
-    with the Hough segments, theta, value and the decision."""
-    pictures = [(title, as_bgr(detection.stages[key])) for key, title in STAGE_TITLES]
-    pictures.append(('7 HoughLinesP, theta, decision', draw(detection, command, p)))
+def lecture_pictures(detection, command, p, draw=annotate):
+    """(key, title, BGR image) for every stage of a detection made with keep_stages=True,
+    ending with the Hough segments, theta, value and the decision."""
+    pictures = [(key, title, as_bgr(detection.stages[key])) for key, title in STAGE_TITLES]
+    pictures.append(('hough', '7 HoughLinesP, theta, decision', draw(detection, command, p)))
     return pictures
+
+
+def stage_pictures(detection, command, p, draw=annotate):
+    """(title, BGR image) of lecture_pictures."""
+    return [(title, image) for _, title, image in lecture_pictures(detection, command, p, draw)]
 
 
 def contact_sheet(pictures, width=320, columns=4):
@@ -67,13 +101,13 @@ def contact_sheet(pictures, width=320, columns=4):
     return np.vstack(rows)
 
 
-def write_stages(folder, index, detection, command, p, draw=annotate):
-    """NNNN_K_stage.png for each stage of frame NNNN, and NNNN_sheet.png with all of them."""
-    pictures = stage_pictures(detection, command, p, draw)
-    keys = [key for key, _ in STAGE_TITLES] + ['hough']
-    for k, ((_, image), key) in enumerate(zip(pictures, keys)):
+def write_stages(folder, index, pictures):
+    """NNNN_K_stage.png for each (key, title, image) of frame NNNN, and NNNN_sheet.png with
+    all of them."""
+    for k, (key, _, image) in enumerate(pictures):
         cv2.imwrite(os.path.join(folder, f'{index:04d}_{k}_{key}.png'), image)
-    cv2.imwrite(os.path.join(folder, f'{index:04d}_sheet.png'), contact_sheet(pictures))
+    cv2.imwrite(os.path.join(folder, f'{index:04d}_sheet.png'),
+                contact_sheet([(title, image) for _, title, image in pictures]))
 
 
 def decision_record(index, label, detection, command, t, extra):
@@ -141,13 +175,15 @@ class Outputs:
 
     decisions: a text file for JSON Lines; video: a VideoSink; stages: a folder for every
     stage of every frame; bag: a bags.BagRecorder (frames, if it records them); debug:
-    (publisher, message maker) for the debug image topic; show: a window; draw: what makes
-    the annotated picture (annotate)."""
+    (publisher, message maker) for the debug image topic; show: a window; draw(detection,
+    command, p): what makes the annotated picture (annotate: the lecture's); pictures(detection,
+    command, p): the stages' (key, title, image) (lecture_pictures)."""
 
     def __init__(self, p, decisions=None, video=None, stages=None, bag=None, debug=None,
-                 show=False, progress=None, draw=annotate):
+                 show=False, progress=None, draw=None, pictures=None):
         self.p, self.decisions, self.video, self.stages = p, decisions, video, stages
-        self.bag, self.show, self.draw = bag, show, draw
+        self.bag, self.show, self.draw = bag, show, draw or annotate
+        self.pictures = pictures or (lambda d, c, p: lecture_pictures(d, c, p, self.draw))
         self.debug, self.debug_message = debug or (None, None)
         self.progress = progress or Progress()
 
@@ -160,7 +196,7 @@ class Outputs:
         """A frame's record and pictures; True if the window's user pressed q."""
         self.write(record)
         if self.stages:
-            write_stages(self.stages, record['frame'], detection, command, self.p, self.draw)
+            write_stages(self.stages, record['frame'], self.pictures(detection, command, self.p))
         quit_pressed = False
         sinks = self._picture_sinks(t)
         if sinks or self.show:  # the annotated picture is drawn only when something takes it

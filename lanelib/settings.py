@@ -54,7 +54,11 @@ def validate(params):
         if meta['choices'] and value not in meta['choices']:
             raise ValueError(f"{f.name} must be one of {', '.join(meta['choices'])}, "
                              f'not {value!r}')
-        if meta['check'] and not meta['check'](value):
+        try:
+            ok = not meta['check'] or meta['check'](value)
+        except ValueError as e:  # a check that says itself what is wrong
+            raise ValueError(f'{f.name}: {e}') from None
+        if not ok:
             raise ValueError(f'{f.name} = {value!r} is out of range: {meta["help"]}')
     return params
 

@@ -93,13 +93,16 @@ class Detection:
     lines: (N, 4) segments x1, y1, x2, y2 in the undistorted image [px]; slopes: SlopeSum;
     image: the undistorted BGR frame the segments belong to (made on first use, since only
     pictures need the whole of it); stages: intermediate images, only when asked for;
-    cluttered: too many edges to read, so Hough was skipped (the improved controller's bound).
+    The improved controller reads colours instead of segments and adds: pieces, the pieces of
+    tape it found (lanelib/colour.py); masks, its colour masks and the row they start at;
+    cluttered, more pieces than it reads (it keeps the longest).
     """
 
     def __init__(self, lines, slopes, image=None, stages=None, make_image=None,
                  cluttered=False):
         self.lines, self.slopes, self.stages = lines, slopes, stages
         self.cluttered = cluttered
+        self.pieces, self.masks = [], ({}, 0)
         self._image, self._make_image = image, make_image
 
     @property
@@ -107,3 +110,6 @@ class Detection:
         if self._image is None and self._make_image is not None:
             self._image, self._make_image = self._make_image(), None
         return self._image
+
+    def set_image(self, image, make_image=None):
+        self._image, self._make_image = image, make_image

@@ -7,6 +7,7 @@ import pytest
 from kobuki_lane import LaneParams, calibration_camera, detect, make_controller
 from lanelib.camera import LECTURE_CAMERA, undistortion_maps
 from lanelib.fast import FastPipeline
+from lanelib.improved import ImprovedParams
 from lanelib.stages import hough_lines, region_of_interest_vertices
 from tools.bench import cluttered_frame, sample_frames, simulator_frames
 
@@ -45,13 +46,25 @@ def test_the_whole_undistorted_image_is_still_there_for_pictures(frames):
     assert np.array_equal(detection.image, calibration_camera(frames[0], LECTURE_CAMERA))
 
 
+def pieces_of(detection):
+    return [(p.colour, p.x.tolist(), p.y.tolist()) for p in detection.pieces]
+
+
 def test_improved_perception_band_matches_the_whole_frame(frames):
+    # the improved controller undistorts only the floor band's rows; keep_stages makes it
+    # undistort the whole frame: the same masks and the same pieces of tape, to the bit
     improved = make_controller('improved', LaneParams())
+    found = 0
     for frame in frames[::4]:
-        fast = improved.perceive(frame)
-        whole = improved.pipeline(frame, LECTURE_CAMERA, keep_stages=True,
-                                  roi=improved.roi(640, 480))
-        assert np.array_equal(fast.lines, whole.lines)
+        band = improved.perceive(frame)
+        whole = improved.perceive(frame, keep_stages=True)
+        (masks, first), (full, zero) = band.masks, whole.masks
+        assert zero == 0 and first > 0
+        for colour, mask in masks.items():
+            assert np.array_equal(mask, full[colour][first:first + len(mask)]), colour
+        assert pieces_of(band) == pieces_of(whole)
+        found += len(band.pieces)
+    assert found > len(frames[::4])  # there were pieces to compare
 
 
 def whole_frame(frame, p):
@@ -84,11 +97,21 @@ def test_frame_size_and_camera_changes_rebuild_the_layout(frames):
 
 
 def test_improved_perception_does_not_read_dense_texture(frames):
+    # random texture and 300 random lines: the lecture's pipeline finds segments in it, the
+    # improved controller no piece as wide and as long as a tape, so it never starts driving
     improved = make_controller('improved', LaneParams())
     cluttered = improved.perceive(cluttered_frame(4))
-    assert cluttered.cluttered and len(cluttered.lines) == 0
-    assert improved(cluttered).decision == 'none'  # no lane seen yet: stopped
+    assert cluttered.pieces == []
+    assert improved(cluttered).decision == 'none'
     tape = improved.perceive(frames[0])
-    assert not tape.cluttered and len(tape.lines) > 0
-    # the lecture's pipeline has no such bound
+    assert not tape.cluttered and len(tape.pieces) > 2
+    assert improved(tape).decision != 'none'
     assert len(FastPipeline(LaneParams(), detect)(cluttered_frame(4), LECTURE_CAMERA).lines) > 0
+
+
+def test_improved_perception_reads_at_most_max_pieces(frames):
+    improved = make_controller('improved', LaneParams(), improved=ImprovedParams(max_pieces=3))
+    detection = improved.perceive(frames[0])
+    assert detection.cluttered and len(detection.pieces) == 3
+    everything = make_controller('improved', LaneParams()).perceive(frames[0]).pieces
+    assert [p.length for p in detection.pieces] == sorted(p.length for p in everything)[:-4:-1]

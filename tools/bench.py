@@ -22,8 +22,10 @@ every built-in track, with offsets, noise, a lighting gradient and gaps), prints
               --video-frames frames, with the project's pipeline and with the literal one
   memory      in a fresh process running the node's dry-run loop over the samples, looped:
               RSS after 1,000 and after --soak frames, and the peak
-  worst case  the Hough stage on a cluttered frame (dense texture, many edges), for the lecture's
-              settings and for the improved controller's perception
+  improved    the improved controller (perception, lane fit, steering) per stage, each frame
+              read afresh, interleaved with the literal code on the same frames
+  worst case  cluttered frames (dense texture, many edges; plain floor with up to 1,600
+              lines): the lecture's Hough stage, the improved controller's whole frame
 
 usage (from the repository root):
     python -m tools.bench                      everything (about 2 minutes on 2 cores)
@@ -46,11 +48,11 @@ import cv2
 import numpy as np
 
 import kobuki_lane
-from kobuki_lane import LaneFollower, LaneParams, LectureRule, detect, make_controller
+from kobuki_lane import LaneFollower, LaneParams, LectureRule, detect
 from lanelib.camera import LECTURE_CAMERA
 from lanelib.cli import check_output
 from lanelib.fast import FastPipeline, Layout
-from lanelib.improved import ImprovedParams
+from lanelib.improved import ImprovedController
 from lanelib.outputs import Outputs
 from lanelib.rospy_standin import SimClock, StandInRospy, Twist
 from lanelib.safety import SafeBase
@@ -63,6 +65,7 @@ from tools.common import REPO, SAMPLES, machine, rss_mb, write_json
 
 OUT = os.path.join('out', 'bench')
 STAGES = ('undistort', 'gray', 'blur', 'canny', 'roi', 'hough', 'slopes')
+IMPROVED_STAGES = ('undistort', 'colour', 'pieces', 'lane', 'steer')
 
 
 # ---------------------------------------------------------------- the lecture, literally
@@ -232,20 +235,21 @@ def cluttered_frame(seed=0, size=(480, 640), lines=300, texture=True):
 
 class StageClock:
     """mark(stage) adds the time since the previous mark to that stage's time for the frame
-    (a stage may be marked more than once per frame, once per piece); 'slopes' ends a frame."""
+    (a stage may be marked more than once per frame, once per piece); `end` ends a frame."""
 
-    def __init__(self):
-        self.times = {s: [] for s in STAGES + ('total',)}
+    def __init__(self, stages=STAGES, end='slopes'):
+        self.stages, self.end = stages, end
+        self.times = {s: [] for s in stages + ('total',)}
         self._frame = {}
         self._start = self._last = 0.0
 
     def mark(self, stage):
         now = time.perf_counter()
         if stage == 'start':
-            self._start, self._frame = now, dict.fromkeys(STAGES, 0.0)
+            self._start, self._frame = now, dict.fromkeys(self.stages, 0.0)
         else:
             self._frame[stage] += now - self._last
-            if stage == 'slopes':
+            if stage == self.end:
                 for name, seconds in self._frame.items():
                     self.times[name].append(seconds)
                 self.times['total'].append(now - self._start)
@@ -365,38 +369,68 @@ def memory(count):
     return json.loads(out.strip().splitlines()[-1])
 
 
+def improved_controller(mark):
+    """The improved controller (lane profile 'lecture'), its stages timed by `mark`, and a
+    function that reads one frame afresh (the lane searched for in full, as on the first
+    frame) and steers."""
+    c = ImprovedController(LaneParams(), camera=LECTURE_CAMERA, mark=mark)
+
+    def read(frame):
+        c.reset()
+        c(c.perceive(frame))
+        return c
+    return read
+
+
+def time_improved(frames, repeats):
+    """The improved controller against the literal code on the same frames, interleaved: per
+    stage and whole frame (perception, the lane's fit and the steering)."""
+    clocks = dict(literal=StageClock(), improved=StageClock(IMPROVED_STAGES, 'steer'))
+    improved = improved_controller(clocks['improved'].mark)
+    runs = [lambda f: literal_lecture_pipeline(f, '1.1', clocks['literal'].mark), improved]
+    for _ in range(repeats):
+        for i, frame in enumerate(frames):
+            for k in range(2):
+                runs[(i + k) % 2](frame)
+    result = {name: {stage: stats(t) for stage, t in clock.times.items()}
+              for name, clock in clocks.items()}
+    times = clocks['improved'].times
+    result['improved']['perception'] = stats(np.add(np.add(times['undistort'], times['colour']),
+                                                    times['pieces']))
+    literal = result['literal']['total']['median_ms']
+    result['perception_over_literal'] = round(
+        result['improved']['perception']['median_ms'] / literal, 3)
+    result['improved_over_literal'] = round(result['improved']['total']['median_ms'] / literal,
+                                            3)
+    return result
+
+
 def worst_case(repeats=20):
-    """The Hough stage on cluttered frames: the lecture's settings (never bounded), and the
-    improved perception with and without its max_edge_fraction bound."""
+    """Cluttered frames: the lecture's Hough stage and whole pipeline (never bounded), and the
+    improved controller's whole frame, on dense texture with 300 lines, and on plain floor
+    with ever more lines (the most pieces of line to sort)."""
     def timed(make, frame):
-        clock = StageClock()
-        perceive = make(clock.mark)
+        clock = StageClock(*make[1])
+        read = make[0](clock.mark)
         for _ in range(repeats):
-            det = perceive(frame)
+            out = read(frame)
+        if isinstance(out, ImprovedController):
+            return dict(total=stats(clock.times['total']),
+                        pieces=len(out.perceive(frame).pieces), cluttered=out.cluttered)
         return dict(hough=stats(clock.times['hough']), total=stats(clock.times['total']),
-                    segments=int(len(det.lines)), skipped=bool(det.cluttered))
+                    segments=int(len(out.lines)))
 
     def lecture(mark):
         pipeline = FastPipeline(LaneParams(), detect, mark=mark)
         return lambda frame: pipeline(frame, LECTURE_CAMERA)
 
-    def improved(bound):
-        def make(mark):
-            c = make_controller('improved', LaneParams(), LECTURE_CAMERA,
-                                ImprovedParams(max_edge_fraction=bound))
-            c.pipeline.mark = mark
-            return c.perceive
-        return make
-
+    lecture = (lecture, (STAGES, 'slopes'))
+    improved = (improved_controller, (IMPROVED_STAGES, 'steer'))
     frame = cluttered_frame()
-    out = dict(lecture=timed(lecture, frame), improved_unbounded=timed(improved(1.0), frame),
-               improved=timed(improved(ImprovedParams().max_edge_fraction), frame))
-    # the slowest frame the bound still lets through: lines only, ever more of them
-    through = [timed(improved(ImprovedParams().max_edge_fraction), cluttered_frame(n, lines=n,
-                                                                                texture=False))
-               for n in (100, 200, 400, 800, 1600)]
-    through = [t for t in through if not t['skipped']]
-    out['improved_worst_read'] = max(through, key=lambda t: t['hough']['median_ms'])
+    out = dict(lecture=timed(lecture, frame), improved=timed(improved, frame))
+    lines = [timed(improved, cluttered_frame(n, lines=n, texture=False))
+             for n in (100, 200, 400, 800, 1600)]
+    out['improved_most_lines'] = max(lines, key=lambda t: t['total']['median_ms'])
     return out
 
 
@@ -477,11 +511,29 @@ def main(argv=None):
     report['latency'] = latency(frames)
     print(f"\nframe read -> Twist published: median {report['latency']['median_ms']} ms, "
           f"p95 {report['latency']['p95_ms']} ms")
-    report['worst_case'] = worst_case()
-    for name, w in report['worst_case'].items():
-        print(f"cluttered frame, {name}: Hough median {w['hough']['median_ms']} ms "
-              f"(p95 {w['hough']['p95_ms']}), whole pipeline {w['total']['median_ms']} ms, "
-              f"{w['segments']} segments{' (not read: too many edges)' if w['skipped'] else ''}")
+    report['improved'] = imp = time_improved(frames, args.repeats)
+    print(f'\nimproved controller (lane profile lecture, each frame read afresh) against the '
+          f'literal code, interleaved, {len(frames)} frames x {args.repeats}:')
+    print('| stage | median / p95 ms |\n|---|---|')
+    for stage, t in imp['improved'].items():
+        if stage == 'perception':
+            continue
+        print(f"| {stage} | {t['median_ms']:.3f} / {t['p95_ms']:.3f} |")
+    print(f"perception (undistort, colour, pieces) median "
+          f"{imp['improved']['perception']['median_ms']:.3f} ms, the literal code's whole frame "
+          f"{imp['literal']['total']['median_ms']:.3f} ms: perception/literal "
+          f"{imp['perception_over_literal']}, whole improved frame/literal "
+          f"{imp['improved_over_literal']}")
+    report['worst_case'] = worst = worst_case()
+    w = worst['lecture']
+    print(f"\ncluttered frame, lecture: Hough median {w['hough']['median_ms']} ms (p95 "
+          f"{w['hough']['p95_ms']}), whole pipeline {w['total']['median_ms']} ms, "
+          f"{w['segments']} segments")
+    for name in ('improved', 'improved_most_lines'):
+        w = worst[name]
+        print(f"cluttered frame, {name}: whole frame median {w['total']['median_ms']} ms "
+              f"(p95 {w['total']['p95_ms']}), {w['pieces']} pieces of line read"
+              f"{' (more found: cluttered)' if w['cluttered'] else ''}")
     if not args.quick:
         os.makedirs(OUT, exist_ok=True)
         video = make_video(frames, args.video_frames,

@@ -8,25 +8,45 @@ then renders the onboard view. A run ends when the robot completes the track, de
 (TopDown, SideBySide).
 """
 
+import json
 import math
 
 import cv2
 import numpy as np
 
-from lanelib.camera import LECTURE_CAMERA
+from lanelib.camera import CAMERAS
 from lanelib.improved import ImprovedParams
 from lanelib.outputs import VideoSink
 from lanelib.sim.base import DiffDriveBase
-from lanelib.sim.world import FloorCamera, FloorMap, Track
+from lanelib.sim.world import ColourFloorMap, FloorCamera, FloorMap, Track
 
 STALL_TIME = 30.0  # [s] without 5 cm of progress ends a run
 
 
 def improved_params(spec):
-    """The improved controller's settings for a track: its camera mounting and lane width."""
+    """The improved controller's settings for a track: its camera mounting, its lane width and
+    the lane profile of its world."""
     m = spec.mounting
     return ImprovedParams(camera_height=m.height, camera_pitch=m.pitch_deg,
-                          camera_forward=m.forward, lane_width=spec.track.lane_width)
+                          camera_forward=m.forward, lane_width=spec.track.lane_width,
+                          lane=spec.world.lane)
+
+
+def floor_map(spec, track=None, seed=0):
+    """The floor a track's camera sees: the lecture's grey tapes, or its world in colour (made
+    once per track, world, gaps and dashes in a process: a coloured floor takes seconds)."""
+    track = track or spec.track
+    if not spec.world.lines:
+        return FloorMap(track, spec.gaps, spec.dashes)
+    key = (json.dumps([track.segments, track.lane_width, track.tape_width, spec.gaps,
+                       spec.dashes], sort_keys=True), spec.world, seed)
+    if key not in _COLOUR_FLOORS:
+        _COLOUR_FLOORS.clear()  # one at a time: each is tens of megabytes
+        _COLOUR_FLOORS[key] = ColourFloorMap(track, spec.world, spec.gaps, spec.dashes, seed)
+    return _COLOUR_FLOORS[key]
+
+
+_COLOUR_FLOORS = {}
 
 
 class TrackSimulator:
@@ -43,8 +63,8 @@ class TrackSimulator:
         # open tracks go on straight beyond the finish so the camera still sees tape there
         shown = track if spec.closed else Track(track.lane_width, track.tape_width,
                                                  track.segments + [{'straight': 3.5}])
-        self.floor_map = FloorMap(shown, spec.gaps, spec.dashes)
-        self.camera = FloorCamera(LECTURE_CAMERA, spec.mounting)
+        self.floor_map = floor_map(spec, shown)
+        self.camera = FloorCamera(CAMERAS[spec.camera], spec.mounting)
         ros.listeners.append(lambda t, topic, msg: self.base.command(t, msg.linear.x,
                                                                     msg.angular.z))
         self.rng = np.random.default_rng(seed)
@@ -114,7 +134,7 @@ class TrackSimulator:
         t = float(h[-1, 0])
         length = self.spec.track.length
         offsets = h[:, 4]
-        return dict(track=self.spec.name, controller=controller,
+        return dict(track=self.spec.name, world=self.spec.world.name, controller=controller,
                     completed=self.ended == 'completed',
                     progress=round(min(1.0, float(h[:, 3].max()) / length), 4),
                     distance_m=round(self.base.distance, 3), time_s=round(t, 2),

@@ -5,7 +5,9 @@
     segments:                   # the centre line, from (0, 0) heading +x
       - straight: 1.5           # [m]
       - arc: {radius: 0.8, angle_deg: 90}    # positive turns left, negative right
-    camera: {height: 0.20, pitch_deg: 0}     # optional: the mounting
+    camera: {model: lecture, height: 0.20, pitch_deg: 0}   # optional: camera and mounting
+    world: duckietown           # optional: what the floor looks like (lecture, wood,
+                                # duckietown, autorace), or {base: NAME, lighting: 0.4, ...}
     scene:                                   # optional
       noise: 10                 # frame noise sigma [grey levels]
       gradient: 60              # lighting gradient across the frame [grey levels]
@@ -18,10 +20,11 @@
 import json
 import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
+from lanelib.camera import CAMERAS
 from lanelib.geometry import Mounting
-from lanelib.sim.world import Scene, Track
+from lanelib.sim.world import WORLDS, Scene, Track, World
 
 
 class TrackError(ValueError):
@@ -54,6 +57,8 @@ class TrackSpec:
     scene: Scene = field(default_factory=Scene)
     gaps: list = field(default_factory=list)  # [{'line', 'at', 'length'}]
     dashes: dict = None  # {'line', 'on', 'off'}
+    world: World = field(default_factory=World)
+    camera: str = 'lecture'  # lanelib.camera.CAMERAS
 
     @property
     def closed(self):
@@ -116,7 +121,8 @@ def _line_choice(value, where):
 
 def from_dict(doc, name='track'):
     """Check a parsed track document and build its TrackSpec."""
-    doc = _mapping(doc, name, ('name', 'lane_width', 'tape_width', 'segments', 'camera', 'scene'))
+    doc = _mapping(doc, name, ('name', 'lane_width', 'tape_width', 'segments', 'camera', 'scene',
+                               'world'))
     if 'segments' not in doc:
         raise TrackError(f'{name}.segments is missing')
     lane = _number(doc.get('lane_width', 0.35), f'{name}.lane_width', positive=True)
@@ -124,7 +130,13 @@ def from_dict(doc, name='track'):
     if tape >= lane:
         raise TrackError(f'{name}.tape_width must be smaller than lane_width')
     track = Track(lane_width=lane, tape_width=tape, segments=_segments(doc['segments'], name))
-    cam = _mapping(doc.get('camera', {}), f'{name}.camera', ('height', 'pitch_deg', 'forward'))
+    world = _world(doc.get('world', 'lecture'), f'{name}.world')
+    cam = dict(_mapping(doc.get('camera', {}), f'{name}.camera',
+                        ('model', 'height', 'pitch_deg', 'forward')))
+    model = cam.pop('model', None)
+    if model is not None and model not in CAMERAS:
+        raise TrackError(f"{name}.camera.model must be one of {', '.join(CAMERAS)}, not "
+                         f'{model!r}')
     mounting = Mounting(**{k: _number(v, f'{name}.camera.{k}') for k, v in cam.items()})
     if mounting.height <= 0:
         raise TrackError(f'{name}.camera.height must be positive')
@@ -146,7 +158,54 @@ def from_dict(doc, name='track'):
         dashes = dict(line=_line_choice(d.get('line', 'both'), f'{here}.line'),
                       on=_number(d.get('on'), f'{here}.on', positive=True),
                       off=_number(d.get('off'), f'{here}.off', positive=True))
-    return TrackSpec(str(doc.get('name', name)), track, mounting, scene, gaps, dashes)
+    spec = TrackSpec(str(doc.get('name', name)), track, mounting, scene, gaps, dashes)
+    return with_world(spec, world, keep_camera=bool(cam), model=model)
+
+
+def _world(value, where):
+    """A world's name, or {base: NAME, field: value, ...} changing some of its fields."""
+    if isinstance(value, str):
+        if value not in WORLDS:
+            raise TrackError(f"{where} must be one of {', '.join(WORLDS)}, not {value!r}")
+        return WORLDS[value]
+    keys = ('base', 'floor', 'lighting', 'shadows', 'blur', 'stop_every', 'cast')
+    doc = _mapping(value, where, keys)
+    world = _world(doc.get('base', 'lecture'), f'{where}.base')
+    changes = {}
+    for key in ('lighting', 'shadows', 'blur', 'stop_every'):
+        if key in doc:
+            changes[key] = _number(doc[key], f'{where}.{key}', nonnegative=True)
+    for key in ('shadows', 'blur'):
+        if key in changes:
+            changes[key] = int(changes[key])
+    if 'floor' in doc:
+        if doc['floor'] not in ('plain', 'mats', 'wood'):
+            raise TrackError(f"{where}.floor must be plain, mats or wood, not {doc['floor']!r}")
+        changes['floor'] = doc['floor']
+    if 'cast' in doc:
+        cast = doc['cast']
+        if not isinstance(cast, list) or len(cast) != 3:
+            raise TrackError(f'{where}.cast must be [blue, green, red] gains')
+        changes['cast'] = tuple(_number(g, f'{where}.cast', positive=True) for g in cast)
+    if world.name == 'lecture' and changes:
+        raise TrackError(f"{where}: the lecture's grey world has no such settings; "
+                         'use base: wood, duckietown or autorace')
+    return replace(world, **changes)
+
+
+def with_world(spec, world, keep_camera=False, model=None):
+    """The track in another world: its lane width, camera and mounting (unless the track file
+    gave a mounting: keep_camera), and the lane profile that describes it."""
+    track = spec.track
+    if world.lane_width is not None and world.lane_width != track.lane_width:
+        tape = min(track.tape_width, world.lane_width / 4)
+        track = Track(lane_width=world.lane_width, tape_width=tape, segments=track.segments,
+                      start=track.start)
+    mounting = spec.mounting
+    if world.mounting is not None and not keep_camera:
+        mounting = Mounting(*world.mounting)
+    return replace(spec, track=track, mounting=mounting, world=world,
+                   camera=model or world.camera)
 
 
 def load_track(spec):

@@ -32,6 +32,63 @@ class Scene:
     glare: float = 0.0  # brightness added by a glare patch near the image centre [grey levels]
 
 
+@dataclass(frozen=True)
+class Paint:
+    """A painted line of a world, beside the track's centre line."""
+
+    offset: float  # [lane widths] + to the left of the robot's lane centre
+    colour: tuple  # BGR
+    width: float  # [m]
+    dashes: tuple = None  # (on, off) [m], or None: solid
+
+
+WHITE, YELLOW, RED = (235, 235, 235), (20, 200, 235), (40, 40, 210)
+
+
+@dataclass(frozen=True)
+class World:
+    """What the floor looks like round a track: its surface, its paint, its light, the camera.
+
+    lines: empty for the lecture's two grey tapes (Scene's floor and tape levels)."""
+
+    name: str = 'lecture'
+    floor: str = 'plain'  # plain | mats (foam mats with seams) | wood (planks)
+    floor_colour: tuple = (95, 95, 95)  # BGR
+    lines: tuple = ()  # Paint
+    lane_width: float = None  # [m] between the lane's line centres; None: the track's
+    stop_every: float = 0.0  # [m] a red stop line across the lane this often; 0: none
+    lighting: float = 0.0  # the light over the floor varies by up to this fraction
+    shadows: int = 0  # dark patches on the floor
+    cast: tuple = (1.0, 1.0, 1.0)  # BGR gains: the light's colour and the white balance
+    blur: int = 0  # [px] motion blur along the image rows
+    camera: str = 'lecture'  # lecture | duckiebot (lanelib.camera.CAMERAS)
+    mounting: tuple = None  # (height [m], pitch [deg], forward [m]); None: the track's
+    lane: str = 'lecture'  # the lane profile (lanelib/lanes.py) that describes its lines
+
+
+def _duckietown_lines():
+    """A two-lane Duckietown road, the robot in the right lane: white right edge, yellow
+    dashed centre line (2 in pieces, 1 in gaps), white left edge of the other lane."""
+    return (Paint(-0.5, WHITE, 0.05), Paint(0.5, YELLOW, 0.025, (0.05, 0.025)),
+            Paint(1.5, WHITE, 0.05))
+
+
+WORLDS = {
+    'lecture': World(),
+    'wood': World('wood', floor='wood', floor_colour=(60, 110, 160),
+                  lines=(Paint(-0.5, WHITE, 0.03), Paint(0.5, WHITE, 0.03)), lighting=0.3,
+                  shadows=4, cast=(0.85, 0.95, 1.1), mounting=(0.20, 15.0, 0.10)),
+    'duckietown': World('duckietown', floor='mats', floor_colour=(45, 45, 45),
+                        lines=_duckietown_lines(), lane_width=0.2375, stop_every=2.5,
+                        lighting=0.25, shadows=3, cast=(1.05, 1.0, 0.9), camera='duckiebot',
+                        mounting=(0.10, 20.0, 0.05), lane='duckietown'),
+    'autorace': World('autorace', floor='plain', floor_colour=(70, 70, 70),
+                      lines=(Paint(-0.5, WHITE, 0.015), Paint(0.5, YELLOW, 0.015)),
+                      lane_width=0.285, lighting=0.2, shadows=2, camera='duckiebot',
+                      mounting=(0.12, 25.0, 0.05), lane='autorace'),
+}
+
+
 @dataclass
 class Track:
     """A lane of two tape lines either side of a centre line made of straights and arcs.
@@ -121,6 +178,85 @@ class FloorMap:
         return (xy - self.origin) / self.res
 
 
+class ColourFloorMap:
+    """A world's floor drawn from above in colour (BGR): its surface, its light and shadows,
+    its painted lines and stop lines. Seeded, so a run can be repeated."""
+
+    def __init__(self, track, world, gaps=(), dashes=None, seed=0, margin=3.5, res=FLOOR_RES):
+        c = track.centre
+        normal = np.stack([-np.sin(c[:, 2]), np.cos(c[:, 2])], axis=1)
+        w = track.lane_width
+        lines = [(paint, c[:, :2] + paint.offset * w * normal) for paint in world.lines]
+        pts = np.vstack([xy for _, xy in lines] + [c[:, :2]])
+        self.origin = pts.min(axis=0) - margin
+        size = np.ceil((pts.max(axis=0) + margin - self.origin) / res).astype(int) + 1
+        self.res, self.world = res, world
+        rng = np.random.default_rng(seed)
+        canvas = _surface(world, size[1], size[0], res, self.origin, rng)
+        for paint, xy in lines:
+            side = 'left' if paint.offset == 0.5 else 'right' if paint.offset == -0.5 else None
+            pattern = dashes if (dashes and side) else (
+                dict(line='both', on=paint.dashes[0], off=paint.dashes[1]) if paint.dashes
+                else None)
+            painted = tape_painted(c[:, 3], side or 'none', gaps if side else (), pattern)
+            self._paint(canvas, xy, painted, paint.colour, paint.width)
+        if world.stop_every > 0:
+            for s_stop in np.arange(world.stop_every, track.length, world.stop_every):
+                i = int(np.searchsorted(c[:, 3], s_stop))
+                a = c[i, :2] + 0.5 * w * normal[i]
+                b = c[i, :2] - 0.5 * w * normal[i]
+                self._paint(canvas, np.array([a, b]), np.ones(2, bool), RED, 0.05)
+        for _ in range(world.shadows):  # a patch of shade somewhere near the track
+            centre = c[rng.integers(len(c)), :2] + rng.normal(0.0, 0.3, 2)
+            corners = centre + rng.normal(0.0, 0.35, (5, 2))
+            shade = np.zeros(canvas.shape[:2], np.uint8)
+            cv2.fillPoly(shade, [np.round(self.to_pixels(corners)).astype(np.int32)], 255)
+            shade = cv2.GaussianBlur(shade, (0, 0), 0.03 / res) / 255.0
+            canvas *= (1.0 - 0.35 * shade)[..., None]
+        self.image = np.clip(np.round(canvas), 0, 255).astype(np.uint8)
+
+    def _paint(self, canvas, xy, painted, colour, width):
+        px = np.round((xy - self.origin) / self.res * 16).astype(np.int32)
+        thickness = max(1, int(round(width / self.res)))
+        for run in np.split(np.arange(len(xy)), np.flatnonzero(np.diff(painted)) + 1):
+            if painted[run[0]] and len(run) > 1:
+                cv2.polylines(canvas, [px[run].reshape(-1, 1, 2)], False, colour, thickness,
+                              cv2.LINE_AA, shift=4)
+
+    def to_pixels(self, xy):
+        return (xy - self.origin) / self.res
+
+
+def _surface(world, height, width, res, origin, rng):
+    """The bare floor (float32 BGR), with its texture and the light over it."""
+    base = np.array(world.floor_colour, np.float32)
+    floor = np.empty((height, width, 3), np.float32)
+    floor[:] = base
+    grain = rng.normal(0.0, 1.0, (height, width)).astype(np.float32)
+    yy, xx = np.mgrid[0:height, 0:width].astype(np.float32)
+    wx, wy = origin[0] + xx * res, origin[1] + yy * res
+    if world.floor == 'mats':  # foam mats: a fine relief and seams every 61 cm
+        floor += 6.0 * cv2.GaussianBlur(grain, (0, 0), 1.0)[..., None]
+        seam = (np.abs(((wx + 0.305) % 0.61) - 0.305) > 0.302) | \
+            (np.abs(((wy + 0.305) % 0.61) - 0.305) > 0.302)
+        floor[seam] += 18.0
+    elif world.floor == 'wood':  # planks 12 cm wide along x, each its own tone, grain, seams
+        plank = np.floor(wy / 0.12).astype(int)
+        tone = rng.normal(0.0, 12.0, plank.max() - plank.min() + 1)[plank - plank.min()]
+        streak = cv2.resize(rng.normal(0.0, 1.0, (height, max(1, width // 40))).astype(
+            np.float32), (width, height))
+        floor += (tone + 8.0 * streak)[..., None] * np.array([0.6, 0.8, 1.0], np.float32)
+        floor[(wy % 0.12) < 0.004] *= 0.55
+    else:
+        floor += 2.0 * grain[..., None]
+    if world.lighting:  # a smooth field of light over the floor, a cell a metre across
+        cells = rng.uniform(-1.0, 1.0, (int(height * res) + 2, int(width * res) + 2))
+        light = cv2.resize(cells.astype(np.float32), (width, height),
+                           interpolation=cv2.INTER_CUBIC)
+        floor *= (1.0 + world.lighting * np.clip(light, -1.0, 1.0))[..., None]
+    return floor
+
+
 class FloorCamera:
     """Renders the onboard view of a track from a robot pose."""
 
@@ -165,24 +301,58 @@ class FloorCamera:
         my = ((wy - floor_map.origin[1]) / floor_map.res).astype(np.float32)
         mx[~hit] = -1
         my[~hit] = -1
+        if floor_map.image.ndim == 3:
+            return self._render_colour(floor_map, mx, my, hit, yaw, scene, rng)
         tape = cv2.remap(floor_map.image, mx, my, cv2.INTER_LINEAR,
                          borderMode=cv2.BORDER_CONSTANT, borderValue=0)
         img = scene.floor + ((scene.tape - scene.floor) / 255.0) * tape
-        # the wall: brightness by world direction of the ray, in 12 degree panels
+        img = self._finish(np.where(hit, img, self._wall(yaw, scene)), scene, rng)
+        gray = np.clip(np.round(img), 0, 255).astype(np.uint8)
+        return cv2.cvtColor(gray, cv2.COLOR_GRAY2BGR)
+
+    def _wall(self, yaw, scene):
+        """Beyond the floor, a wall whose brightness changes by direction in 12 degree
+        panels."""
         panel = np.floor((self._azimuth + yaw + math.pi) / math.radians(12)).astype(int) % 30
         wall_levels = scene.wall + 60 * np.sin(np.arange(30) * 2.39996)  # golden-angle spread
-        img = np.where(hit, img, wall_levels[panel])
+        return wall_levels[panel]
+
+    def _finish(self, img, scene, rng):
+        """Supersampling, the light's gradient and glare, and the camera's noise."""
         n = self.supersample
         h, w = img.shape[0] // n, img.shape[1] // n
-        img = img.reshape(h, n, w, n).mean(axis=(1, 3))
+        img = img.reshape((h, n, w, n) + img.shape[2:]).mean(axis=(1, 3))
+        per_pixel = (lambda a: a[..., None]) if img.ndim == 3 else (lambda a: a)
         if scene.gradient:
-            img = img + scene.gradient * (np.linspace(-0.5, 0.5, w)[None, :])
+            img = img + per_pixel(scene.gradient * (np.linspace(-0.5, 0.5, w)[None, :]))
         if scene.glare:
             yy, xx = np.mgrid[0:h, 0:w]
-            img = img + scene.glare * np.exp(-(((xx - w * 0.55) / (w * 0.12)) ** 2
-                                               + ((yy - h * 0.7) / (h * 0.12)) ** 2))
+            img = img + per_pixel(scene.glare * np.exp(-(((xx - w * 0.55) / (w * 0.12)) ** 2
+                                                        + ((yy - h * 0.7) / (h * 0.12)) ** 2)))
         if scene.noise:
             rng = rng if rng is not None else np.random.default_rng(0)
             img = img + rng.normal(0.0, scene.noise, img.shape)
-        gray = np.clip(np.round(img), 0, 255).astype(np.uint8)
-        return cv2.cvtColor(gray, cv2.COLOR_GRAY2BGR)
+        return img
+
+    def _render_colour(self, floor_map, mx, my, hit, yaw, scene, rng):
+        world = floor_map.world
+        img = cv2.remap(floor_map.image, mx, my, cv2.INTER_LINEAR,
+                        borderMode=cv2.BORDER_CONSTANT, borderValue=0).astype(np.float32)
+        wall = self._wall(yaw, scene).astype(np.float32)
+        img[~hit] = wall[~hit][:, None]
+        img *= np.array(world.cast, np.float32)
+        n = self.supersample
+        if world.blur:
+            img = cv2.blur(img, (world.blur * n, 1))
+        h, w = img.shape[0] // n, img.shape[1] // n
+        img = cv2.resize(img, (w, h), interpolation=cv2.INTER_AREA)  # the n x n means
+        if scene.gradient:
+            img += (scene.gradient * np.linspace(-0.5, 0.5, w, dtype=np.float32))[None, :, None]
+        if scene.glare:
+            yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+            img += (scene.glare * np.exp(-(((xx - w * 0.55) / (w * 0.12)) ** 2
+                                           + ((yy - h * 0.7) / (h * 0.12)) ** 2)))[..., None]
+        if scene.noise:
+            rng = rng if rng is not None else np.random.default_rng(0)
+            img += scene.noise * rng.standard_normal(img.shape, dtype=np.float32)
+        return np.clip(np.round(img), 0, 255).astype(np.uint8)

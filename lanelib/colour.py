@@ -1,0 +1,187 @@
+"""Colour for the improved controller: which pixels are white, yellow or red tape, in the light
+that is actually there, and the tape pieces they make on the floor.
+
+The thresholds adapt to each frame instead of being fixed for one room. In Lab, the floor's own
+colour (the median of the floor band, which is mostly floor) is taken as neutral, so a colour
+cast from the light or the camera's white balance is removed, and brightness is judged against
+the floor around the pixel (a box a fifth of the image wide, the wall and the empty border
+undistortion leaves not counted), so dim rooms, bright sun, glare and shadows shift the
+threshold with them:
+
+    white   brighter than its surroundings by 2.5 times their typical variation (at least 20
+            Lab levels) and than the floor by 25, with little colour (chroma below 25)
+    any     a tape of any colour but red lighter than the floor: brighter than its
+            surroundings and the floor as white is, whatever its colour (a floor's dark seams
+            are not tape; nor is dark tape on a light floor, which this does not look for)
+    yellow  b* (yellow-blue) at least 25 above the floor's, more yellow than red or green, and
+            brighter than the floor
+    red     a* (red-green) at least 25 above the floor's (stop lines: never a lane line)
+"""
+
+import math
+
+import cv2
+import numpy as np
+
+from lanelib.geometry import pixels_to_floor
+
+BOX = 0.2  # [image widths] the surroundings a pixel's brightness is judged against
+POINTS = 3  # points that stand for a piece when the lane is fitted (Piece.summary)
+
+
+def colour_masks(bgr, roi):
+    """{'white', 'yellow', 'red', 'any'}: uint8 masks (255 = that colour) of a BGR image, with
+    the floor's colour and brightness taken from the pixels where roi is set."""
+    lab = cv2.cvtColor(bgr, cv2.COLOR_BGR2LAB)
+    light, a, b = cv2.split(lab)
+    floor = (roi > 0).astype(np.uint8)
+    if not floor.any():
+        floor[:] = 1
+    box = (2 * int(BOX * bgr.shape[1] / 2) + 1,) * 2
+    # the surroundings: the floor around the pixel (not the wall, nor the border that
+    # undistortion leaves empty), summed in integers so that a band of rows gives exactly
+    # what the whole frame gives
+    around = (_box_sum(light * floor, box).astype(np.float32) /
+              np.maximum(_box_sum(floor, box), 1).astype(np.float32))
+    local = light.astype(np.float32) - around
+    spread = 1.5 * _median(cv2.convertScaleAbs(local), floor) + 1.0
+    bright = _median(light, floor)
+    contrast = max(20.0, 2.5 * spread)
+    a = a.astype(np.int16) - int(_median(a, floor))
+    b = b.astype(np.int16) - int(_median(b, floor))
+    red = (a > 25) & (a > np.abs(b))
+    lighter = (local > contrast) & (light > bright + 25) & ~red
+    white = lighter & (a.astype(np.int32) ** 2 + b.astype(np.int32) ** 2 < 625)
+    yellow = (b > 25) & (2 * b > 3 * np.abs(a)) & (light > bright)
+    return {name: mask.view(np.uint8) * np.uint8(255)
+            for name, mask in (('white', white), ('yellow', yellow), ('red', red),
+                               ('any', lighter))}
+
+
+def _median(image, mask):
+    """The median of a uint8 image where mask is set (the lower one of an even count)."""
+    counts = np.cumsum(cv2.calcHist([image], [0], mask, [256], [0, 256]).ravel())
+    return float(np.searchsorted(counts, counts[-1] / 2))
+
+
+def _box_sum(image, box):
+    """Sum of the uint8 image over a box around each pixel (zero outside), as int32."""
+    return cv2.boxFilter(image, cv2.CV_32S, box, normalize=False,
+                         borderType=cv2.BORDER_CONSTANT)
+
+
+class Piece:
+    """A nearly straight piece of tape on the floor: its points (robot frame, metres), each
+    weighted by the length it stands for, its direction, and its colour; and `summary`, POINTS
+    points that stand for it when the lane is fitted (x, y, weight): the means of its points
+    in POINTS equal runs along its axis, each weighted by its share of the length."""
+
+    def __init__(self, x, y, phi, colour, length, width):
+        self.x, self.y, self.phi, self.colour = x, y, phi, colour
+        self.length, self.width = length, width
+        self.w = np.full(len(x), length / len(x))
+        runs = np.array_split(np.argsort(x * math.cos(phi) + y * math.sin(phi)), POINTS)
+        self.summary = (np.array([x[i].mean() for i in runs]),
+                        np.array([y[i].mean() for i in runs]),
+                        np.full(POINTS, length / POINTS))
+
+
+def tape_pieces(mask, colour, matrix, mounting, tape_width, min_length, step, row0=0,
+                max_points=120, side=None, budget=4000):
+    """The pieces of a colour mask (rows row0.. of an undistorted image with camera matrix
+    `matrix`) on the floor: each connected region, seen on the floor, cut across into parts
+    about `step` metres long by distance ahead, and a part still longer than 1.5 `step` (a
+    line running across the view) halved across its own length until none is, so that a line
+    gives nearly straight pieces of about that length whichever way it runs and however it
+    curves (cut every so many rows instead, a piece near the camera would be shorter than the
+    tape is wide). A piece not longer
+    than it is wide, much narrower or wider than the tape (an edge, a glint, a blob, a sheet
+    of paper) or shorter than min_length [m] is not kept. Where a piece has pixels on `side`
+    (a mask: the edge of the view, see view_sides), the view cuts the tape: the points level
+    with the cut are left out (their middle is not the tape's). At most `budget` pixels of a
+    region and max_points of a piece are used."""
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    pieces = []
+    for i in range(1, count):
+        if stats[i, cv2.CC_STAT_AREA] < 20:
+            continue
+        top, height = stats[i, cv2.CC_STAT_TOP], stats[i, cv2.CC_STAT_HEIGHT]
+        left, span = stats[i, cv2.CC_STAT_LEFT], stats[i, cv2.CC_STAT_WIDTH]
+        rows, cols = np.nonzero(labels[top:top + height, left:left + span] == i)
+        rows += top
+        cols += left
+        cut = side[rows, cols] if side is not None else np.zeros(len(rows), bool)
+        use = cut.copy()  # every pixel where the view cuts the tape, and a sample of the rest
+        use[::max(1, len(rows) // budget)] = True
+        uv = np.stack([cols[use], rows[use] + row0], axis=1).astype(float)
+        x, y, ok = pixels_to_floor(uv, matrix, mounting)
+        x, y, cut = x[ok], y[ok], cut[use][ok]
+        if len(x) < 10:
+            continue
+        # across by distance ahead first (the image's rows), then each part that is still
+        # longer than that (a line running across the view) across its own length
+        n = max(1, int(round(np.ptp(x) / step)))  # equal parts, none a short stub
+        which = np.minimum((x - x.min()) / max(np.ptp(x), 1e-9) * n, n - 1).astype(int)
+        for b in range(n):
+            band = np.flatnonzero(which == b)
+            for part in _halves(x[band], y[band], 1.5 * step):
+                piece = _piece(x[band[part]], y[band[part]], cut[band[part]], colour,
+                               tape_width, min_length, max_points)
+                if piece is not None:
+                    pieces.append(piece)
+    return pieces
+
+
+def _axis(x, y):
+    """(spread, axes) of points: the variances along, and the directions of, their principal
+    axes (the longest last)."""
+    return np.linalg.eigh(np.cov(np.stack([x, y])))
+
+
+def _halves(x, y, longest):
+    """Index arrays of the parts of the points (x, y) made by halving them across their
+    principal axis, at the middle of its extent, until no part is longer than `longest`."""
+    todo, parts = [np.arange(len(x))], []
+    while todo:
+        part = todo.pop()
+        if len(part) < 10:
+            continue
+        _, axes = _axis(x[part], y[part])
+        along = x[part] * axes[0, 1] + y[part] * axes[1, 1]
+        low, high = along.min(), along.max()
+        if high - low <= longest:
+            parts.append(part)
+        else:
+            middle = (low + high) / 2
+            todo += [part[along < middle], part[along >= middle]]
+    return parts
+
+
+def view_sides(view):
+    """The pixels of `view` (a mask: the part of the image that is looked at) on its edge: a
+    neighbour outside it, or on the image's border."""
+    inner = cv2.erode(view, np.ones((3, 3), np.uint8), borderType=cv2.BORDER_CONSTANT,
+                      borderValue=0)
+    return (view > 0) & (inner == 0)
+
+
+def _piece(x, y, cut, colour, tape_width, min_length, max_points):
+    if cut.any():
+        # where the view cuts the tape, the tape's cross-sections are partial and their middle
+        # is off its centre: leave out the points level (along the tape) with the cut
+        _, axes = _axis(x, y)
+        along = x * axes[0, 1] + y * axes[1, 1]
+        whole = (along < along[cut].min()) | (along > along[cut].max())
+        x, y = x[whole], y[whole]
+    if len(x) < 10:
+        return None
+    x, y = x[::max(1, len(x) // max_points)], y[::max(1, len(x) // max_points)]
+    spread, axes = _axis(x, y)
+    # a uniform strip of length L has a standard deviation of L / sqrt(12) along it
+    length = math.sqrt(12 * max(spread[1], 0.0))
+    width = math.sqrt(12 * max(spread[0], 0.0))
+    if (length < min_length or length < 1.5 * width or
+            not 0.4 * tape_width <= width <= 3.0 * tape_width):
+        return None
+    d = axes[:, 1] if axes[0, 1] >= 0 else -axes[:, 1]  # pointing ahead
+    return Piece(x, y, math.atan2(d[1], d[0]), colour, length, width)

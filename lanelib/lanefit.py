@@ -1,0 +1,234 @@
+"""Which of the lines in view are the robot's lane, and where that lane goes.
+
+The lane's centre line is an arc through (0, e) in the robot frame (x ahead, y left), with
+heading psi [rad] and curvature k [1/m, + bends left]: an arc, not a polynomial in x, so that a
+Duckietown bend that turns 90 degrees within half a metre is one lane. Its left line lies half a
+lane width to its left, its right line half a lane width to its right.
+
+The search: every piece of line in view, on every side its colour allows, seeds lanes parallel
+to it, straight and bending (and the lane predicted from earlier frames, when there is one). Each
+seed is fitted to the pieces that lie on its two lines (Gauss-Newton on their distances from
+the arc, within a tolerance that starts at half a lane width and tightens to a quarter), and the
+lane kept is the one whose two lines are best supported: sqrt(left) + sqrt(right) of the line
+lengths they explain, discounted with distance ahead (far points are less certain) and for a
+robot outside the lane it names. So a neighbouring lane's lines, a centre line the robot is
+crossing, a line of the wrong colour on a side, are not its lane's, and one line alone still
+places the lane, half a lane width beside it.
+"""
+
+import math
+
+import numpy as np
+
+from lanelib.colour import POINTS
+
+TOLERANCES = (0.5, 0.35, 0.25, 0.25)  # [lane widths] for the fitting rounds
+SEED_CURVATURES = (0.0, -0.5, 0.5, -1.0, 1.0, -2.0, 2.0)  # [1 / lane width]
+ITERATIONS = 4  # Gauss-Newton steps per fitting round
+PRIOR_PULL = 0.03  # [of the line in view] pull towards the expected offset and heading
+
+
+def signed_distance(x, y, e, psi, k):
+    """Distance of points from the centre arc, + to the left of its direction. Arrays of arcs
+    (e, psi, k of shape (S, 1)) give an (S, N) array. Exact for any k, 0 included: in the arc's
+    own frame (u ahead, v left of its start) the circle of curvature k is
+    2 v - k (u^2 + v^2) = 0, and the distance is that over 1 + k r, r from the circle's centre."""
+    return _distance(x, y, e, psi, k)[0]
+
+
+def _distance(x, y, e, psi, k, jacobian=False):
+    """signed_distance, and with `jacobian` its derivatives in e, psi and k."""
+    s, c = np.sin(psi), np.cos(psi)
+    dy = y - e
+    u, v = x * c + dy * s, dy * c - x * s
+    ku, kv1 = k * u, 1 - k * v
+    root = np.sqrt(ku * ku + kv1 * kv1)  # k r
+    q, den = 2 * v - k * (u * u + v * v), 1 + root
+    d = q / den
+    if not jacobian:
+        return d, None
+    # d(q)/d(u, v, k) and d(root)/d(u, v, k); u, v depend on e (-s, -c) and psi (v, -u)
+    root = np.maximum(root, 1e-12)
+    q_u, q_v = -2 * ku, 2 * kv1
+    r_u, r_v = k * ku / root, -k * kv1 / root
+    q_k, r_k = -(u * u + v * v), (ku * u - kv1 * v) / root
+    q_e, r_e = -(q_u * s + q_v * c), -(r_u * s + r_v * c)
+    q_psi, r_psi = q_u * v - q_v * u, r_u * v - r_v * u
+    return d, np.stack([(q_e - d * r_e) / den, (q_psi - d * r_psi) / den,
+                        (q_k - d * r_k) / den], axis=-1)
+
+
+def _distances(x, y, arcs, jacobian=False):
+    e, psi, k = (arcs[:, i:i + 1] for i in range(3))
+    return _distance(x, y, e, psi, k, jacobian)
+
+
+def fit_lanes(x, y, sides, w, lanes, priors, limits, iterations=ITERATIONS):
+    """Weighted least squares of the points' distances from their lines, for S lanes at once:
+    x, y (N,) points; sides (S, N) each point's line (+1 left, -1 right, 0 neither), w (S, N)
+    their weights; lanes (S, 4) the starts (e, psi, k, width), a point on side s lying
+    s * width / 2 from the centre arc. priors: (weights, target), each (4,): each of e, psi,
+    k, width pulled towards its target with that weight; limits: the width's bounds (equal:
+    held there). Gauss-Newton."""
+    lanes = lanes.astype(float).copy()
+    pull, target = (np.asarray(v, float) for v in priors)
+    pull = pull + 1e-9
+    if limits[0] == limits[1]:
+        pull[3] = 1e12  # no step in the width
+    for _ in range(iterations):
+        d, jac = _distances(x, y, lanes, jacobian=True)
+        jac = np.concatenate([jac, np.broadcast_to(-sides[..., None] / 2, jac.shape[:2] + (1,))],
+                             axis=2)
+        wj = np.swapaxes(jac * w[..., None], 1, 2)  # (S, 4, N)
+        a = wj @ jac + np.diag(pull)
+        b = (wj @ (d - sides * lanes[:, 3:4] / 2)[..., None])[..., 0] + pull * (lanes - target)
+        lanes -= np.linalg.solve(a, b[..., None])[..., 0]
+        lanes[:, 1] = np.clip(lanes[:, 1], -1.4, 1.4)
+        lanes[:, 2] = np.clip(lanes[:, 2], -30.0, 30.0)
+        lanes[:, 3] = np.clip(lanes[:, 3], *limits)
+    return lanes
+
+
+class LaneFit:
+    """The lane found: arc (e, psi, k) and its width between the line centres as the lines
+    show it; per piece its side (+1 left, -1 right, 0 not the lane's); the lengths of line on
+    each side [m]; and the centre-line points the pieces give (x, y, weight)."""
+
+    def __init__(self, arc, sides, left, right, centre, width=None):
+        self.e, self.psi, self.k = arc[:3]
+        self.width = width
+        self.sides, self.left, self.right, self.centre = sides, left, right, centre
+
+    def point_at(self, distance):
+        """(x, y, heading) of the centre line at `distance` [m] from the robot, along it."""
+        s = np.linspace(0.0, 3.0 * distance + 1e-6, 400)
+        psi, k = self.psi, self.k
+        if abs(k) < 1e-4:
+            x, y, h = s * math.cos(psi), self.e + s * math.sin(psi), np.full_like(s, psi)
+        else:
+            h = psi + k * s
+            x = (np.sin(h) - math.sin(psi)) / k
+            y = self.e + (math.cos(psi) - np.cos(h)) / k
+        far = np.hypot(x, y) >= distance
+        i = int(np.argmax(far)) if far.any() else len(s) - 1
+        return float(x[i]), float(y[i]), float(h[i])
+
+
+def _points(pieces, reach):
+    """Each piece's POINTS points (Piece.summary), weighted less the further ahead they are."""
+    x = np.concatenate([p.summary[0] for p in pieces])
+    y = np.concatenate([p.summary[1] for p in pieces])
+    w = np.concatenate([p.summary[2] for p in pieces]) / (1.0 + (x / reach) ** 2)
+    return x, y, w
+
+
+def _sides(distance, allowed, half, tol):
+    """(S, pieces) each piece's side in each lane: the allowed side (allowed: (pieces, 2)
+    left, right) whose line, half (S,) from the centre, its points lie nearest on average,
+    within tol; 0 for neither."""
+    d = distance.reshape(len(distance), len(allowed), POINTS).mean(axis=2)
+    half = half[:, None]
+    left = np.where(allowed[:, 0], np.abs(d - half), np.inf)
+    right = np.where(allowed[:, 1], np.abs(d + half), np.inf)
+    return np.where((left <= right) & (left < tol), 1, np.where(right < tol, -1, 0))
+
+
+def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tolerance=0.3):
+    """The best-supported lane (LaneFit) among the pieces, or None. prior: (e, psi, k) of the
+    lane expected from earlier frames; every fit is pulled a little towards its offset and
+    heading, and when it, refitted, explains `explained` of the line in view with the robot
+    inside it, the search ends there. The width between the lines is
+    fitted within width_tolerance of lane_width (a camera's pitch a little off, a track taped a
+    little wider, make the lines look that much further apart: forced to the profile's width
+    the lane would tilt to fit them); with one line in view it stays lane_width."""
+    if not pieces:
+        return None
+    half = lane_width / 2
+    points = _points(pieces, 2.6 * lane_width)
+    allowed = np.array([[1 in s, -1 in s] for s in (profile.sides(p.colour) for p in pieces)])
+    total = float(points[2].sum())
+    # priors: k towards 0, weakly (a point x ahead moves k x^2 / 2 with k, so this weighs about
+    # as much as 0.2 % of the points a lane width ahead), the width towards the profile's; and
+    # with a lane expected, its offset and heading at the robot, as much as 3 % of the
+    # points near the robot: the lines seen far ahead place the lane there well, but its
+    # offset and heading under the robot only through a long lever (a bend's entry seen from
+    # a level camera fits an arc turned the wrong way), which the expected lane steadies
+    weights = [0.0, 0.0, 0.002 * total * lane_width ** 4, 0.02 * total]
+    target = [0.0, 0.0, 0.0, lane_width]
+    if prior is not None:
+        weights[:2] = PRIOR_PULL * total, PRIOR_PULL * total * lane_width ** 2
+        target[:2] = prior[:2]
+    priors = (weights, target)
+    limits = (lane_width * (1 - width_tolerance), lane_width * (1 + width_tolerance))
+    search = (points, allowed, lane_width, priors, limits)
+    if prior is not None:
+        found = _fit_seeds(np.array([[*prior, lane_width]], float), *search)
+        if found is not None:
+            _, lane, _, support = found
+            if abs(lane[0]) <= lane[3] / 2 and support >= explained * total:
+                return _lane(pieces, found)
+    seeds = [] if prior is None else [(*prior, lane_width)]
+    for piece, (may_left, may_right) in zip(pieces, allowed):
+        x0, y0 = piece.summary[0][1], piece.summary[1][1]
+        for side in [s for s, may in ((1, may_left), (-1, may_right)) if may]:
+            e = y0 - side * half / math.cos(piece.phi) - math.tan(piece.phi) * x0
+            seeds += [(e, piece.phi, k / lane_width, lane_width) for k in SEED_CURVATURES]
+    found = _fit_seeds(np.array(seeds, float), *search)
+    return None if found is None else _lane(pieces, found)
+
+
+def _fit_seeds(seeds, points, allowed, lane_width, priors, limits):
+    """(score, lane, sides, support) of the best lane grown from the seeds (S, 4: e, psi, k,
+    width), or None."""
+    x, y, w = points
+    lanes = seeds
+    for tol in TOLERANCES:
+        sides = _sides(_distances(x, y, lanes)[0], allowed, lanes[:, 3] / 2, tol * lane_width)
+        on = np.repeat(sides, POINTS, axis=1)
+        lanes = fit_lanes(x, y, on, (on != 0) * w, lanes, priors, limits)
+        # seeds from pieces of one line mostly grow into one lane: fit it once
+        grid = np.round(lanes / (0.02 * lane_width, 0.02, 0.1 / lane_width, 0.02 * lane_width))
+        lanes = lanes[np.sort(np.unique(grid, axis=0, return_index=True)[1])]
+    distance = _distances(x, y, lanes)[0]
+    half = lanes[:, 3] / 2
+    sides = _sides(distance, allowed, half, TOLERANCES[-1] * lane_width)
+    on = np.repeat(sides, POINTS, axis=1)
+    left, right = ((on == 1) * w).sum(axis=1), ((on == -1) * w).sum(axis=1)
+    # line in the middle half of the lane, where only floor should be
+    middle = (np.abs(distance.reshape(len(lanes), -1, POINTS).mean(axis=2)) <
+              half[:, None] / 2)
+    inside = (np.repeat(middle & (sides == 0), POINTS, axis=1) * w).sum(axis=1)
+    outside = np.maximum(0.0, np.abs(lanes[:, 0]) - half)  # the robot outside the lane it names
+    score = (np.sqrt(left) + np.sqrt(right) - np.sqrt(inside)) * np.exp(-outside / half)
+    score[~sides.any(axis=1)] = -1.0
+    best = int(np.argmax(score))
+    if score[best] <= 0:
+        return None
+    return score[best], lanes[best], sides[best], float(left[best] + right[best])
+
+
+def _lane(pieces, found):
+    _, lane, sides, _ = found
+    lengths = [sum(p.length for p, s in zip(pieces, sides) if s == side) for side in (1, -1)]
+    return LaneFit(lane, sides, lengths[0], lengths[1],
+                   _centre_points(pieces, sides, lane[:3], lane[3] / 2), float(lane[3]))
+
+
+def _centre_points(pieces, sides, arc, half):
+    """The lane's pieces moved half a lane width towards the centre line, across the arc."""
+    xs, ys, ws = [], [], []
+    e, psi, k = arc
+    for piece, side in zip(pieces, sides):
+        if not side:
+            continue
+        if abs(k) < 1e-4:
+            nx, ny = np.full(len(piece.x), -math.sin(psi)), np.full(len(piece.x), math.cos(psi))
+        else:  # the left normal at each point: towards the circle's centre for a left bend
+            cx, cy = -math.sin(psi) / k, e + math.cos(psi) / k
+            dx, dy = cx - piece.x, cy - piece.y
+            r = np.maximum(np.hypot(dx, dy), 1e-9)
+            nx, ny = math.copysign(1.0, k) * dx / r, math.copysign(1.0, k) * dy / r
+        xs.append(piece.x - side * half * nx)
+        ys.append(piece.y - side * half * ny)
+        ws.append(piece.w)
+    return np.concatenate(xs), np.concatenate(ys), np.concatenate(ws)

@@ -1,0 +1,262 @@
+"""Lane profiles, colour masks, pieces of tape, and the choice of the robot's own lane."""
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from kobuki_lane import LaneParams, main
+from lanelib.colour import Piece, colour_masks, tape_pieces
+from lanelib.geometry import Mounting, floor_to_pixels
+from lanelib.improved import ImprovedController, ImprovedParams
+from lanelib.lanefit import find_lane, signed_distance
+from lanelib.lanes import BUILTIN, LaneError, load_lane
+from tests.helpers import SAMPLES
+
+DT = BUILTIN['duckietown']
+
+
+# ---------------------------------------------------------------- profiles
+
+def test_builtin_profiles_carry_their_published_dimensions():
+    assert BUILTIN['lecture'].lane_width == 0.35
+    assert (DT.lane_width, DT.left.colour, DT.left.style, DT.right.colour) == \
+        (0.2375, 'yellow', 'dashed', 'white')
+    assert (DT.left.width, DT.right.width) == (0.025, 0.05)  # 1 in and 2 in tape
+    auto = BUILTIN['autorace']
+    assert (auto.lane_width, auto.left.colour, auto.right.colour) == (0.285, 'yellow', 'white')
+    assert DT.sides('yellow') == [1] and DT.sides('white') == [-1]
+    assert BUILTIN['lecture'].sides('any') == [1, -1]
+
+
+def test_a_lane_file_is_read(tmp_path):
+    path = tmp_path / 'mine.yaml'
+    path.write_text('lane_width: 0.3\nleft: {colour: white, style: dashed, width: 0.02}\n'
+                    'right: {colour: yellow}\n')
+    lane = load_lane(str(path))
+    assert lane.lane_width == 0.3 and lane.left.colour == 'white' and lane.left.width == 0.02
+    assert lane.right.colour == 'yellow' and lane.right.width == 0.03  # the default tape
+    assert lane.colours == ['white', 'yellow']
+
+
+@pytest.mark.parametrize('text, message', [
+    ('lane_width: -1\nleft: {}\nright: {}', 'mine.yaml.lane_width must be a positive number'),
+    ('left: {}\nright: {}', 'mine.yaml.lane_width is missing'),
+    ('lane_width: 0.3\nleft: {colour: blue}\nright: {}', "mine.yaml.left.colour must be white, "
+                                                          "yellow or any, not 'blue'"),
+    ('lane_width: 0.3\nleft: {}\nright: {style: dotted}', 'mine.yaml.right.style must be solid'),
+    ('lane_width: 0.3\nleft: {width: 0}\nright: {}', 'mine.yaml.left.width must be a tape'),
+    ('lane_width: 0.05\nleft: {width: 0.03}\nright: {width: 0.03}', 'do not fit in lane_width'),
+    ('lane_width: 0.3\nleft: {}\nright: {}\nlanes: 2', 'unknown key(s) lanes'),
+    ('lane_width: [0.3', 'cannot read as YAML'),
+])
+def test_a_bad_lane_file_names_the_field(tmp_path, text, message):
+    path = tmp_path / 'mine.yaml'
+    path.write_text(text)
+    with pytest.raises(LaneError, match=None) as e:
+        load_lane(str(path))
+    assert message in str(e.value)
+
+
+def test_the_node_refuses_a_bad_lane_with_status_2(tmp_path, capsys):
+    path = tmp_path / 'mine.yaml'
+    path.write_text('lane_width: 0.3\nleft: {colour: blue}\nright: {}')
+    for lane, message in ((str(path), "left.colour must be white, yellow or any, not 'blue'"),
+                          ('kerb', "lane 'kerb' is neither a built-in profile")):
+        with pytest.raises(SystemExit) as e:
+            main(['--source', SAMPLES, '--dry-run', '--controller', 'improved', '--lane', lane])
+        assert e.value.code == 2
+        assert message in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------- colour
+
+def floor_scene(floor=(90, 90, 90), tapes=(), size=(240, 320)):
+    """A flat floor with vertical stripes of tape: (column, width px, BGR colour)."""
+    image = np.zeros(size + (3,), np.uint8)
+    image[:] = floor
+    for column, width, colour in tapes:
+        image[:, column:column + width] = colour
+    return image
+
+
+WHITE, YELLOW, RED = (235, 235, 235), (40, 200, 220), (40, 40, 210)
+
+
+@pytest.mark.parametrize('light', [0.35, 1.0, 1.6], ids=['dim room', 'lab', 'bright sun'])
+@pytest.mark.parametrize('cast', [(1.0, 1.0, 1.0), (0.8, 0.95, 1.25)], ids=['neutral', 'warm'])
+def test_colours_are_found_in_the_light_that_is_there(light, cast):
+    scene = floor_scene(tapes=[(60, 12, WHITE), (150, 12, YELLOW), (240, 12, RED)])
+    lit = np.clip(scene * light * np.array(cast), 0, 255).astype(np.uint8)
+    masks = colour_masks(lit, np.full(lit.shape[:2], 255, np.uint8))
+    columns = {name: set(np.flatnonzero(mask.any(axis=0))) for name, mask in masks.items()}
+    assert columns['white'] == set(range(60, 72))
+    assert columns['yellow'] == set(range(150, 162))
+    assert columns['red'] == set(range(240, 252))
+    assert set(range(60, 72)) <= columns['any']  # white is lighter than the floor: a tape
+    assert not columns['any'] & set(range(240, 252))  # red tape on grey is not lighter
+
+
+def test_a_floor_brighter_on_one_side_does_not_make_lines():
+    ramp = np.tile(np.linspace(40, 200, 320), (240, 1))  # a lamp to one side
+    scene = np.repeat(ramp[..., None], 3, axis=2).astype(np.uint8)
+    scene[:, 200:212] = np.clip(scene[:, 200:212].astype(int) + 60, 0, 255)
+    masks = colour_masks(scene, np.full((240, 320), 255, np.uint8))
+    assert set(np.flatnonzero(masks['any'].any(axis=0))) == set(range(200, 212))
+
+
+def test_the_floor_is_judged_only_where_the_mask_says():
+    # the wall above the floor band is white: judged as floor, it would make the floor dark
+    scene = floor_scene(tapes=[(100, 12, WHITE)])
+    scene[:80] = 250
+    roi = np.zeros((240, 320), np.uint8)
+    roi[80:] = 255
+    masks = colour_masks(scene, roi)
+    assert set(np.flatnonzero(masks['white'][80:].any(axis=0))) == set(range(100, 112))
+
+
+# ---------------------------------------------------------------- pieces of tape
+
+MOUNT = Mounting(0.10, 20.0, 0.0)
+K = np.array([[300.0, 0, 320], [0, 300.0, 240], [0, 0, 1]])
+
+
+def painted(lines, size=(480, 640), along=(0.12, 1.5)):
+    """A mask with floor strips painted on it: (y centre [m], width [m]) running ahead."""
+    mask = np.zeros(size, np.uint8)
+    x = np.linspace(*along, 400)
+    for y, width in lines:
+        left = floor_to_pixels(x, np.full_like(x, y + width / 2), K, MOUNT)
+        right = floor_to_pixels(x, np.full_like(x, y - width / 2), K, MOUNT)
+        polygon = np.concatenate([np.stack(left[:2], 1), np.stack(right[:2], 1)[::-1]])
+        cv2.fillPoly(mask, [np.round(polygon).astype(np.int32)], 255)
+    return mask
+
+
+def test_tape_pieces_lie_where_the_tape_is_on_the_floor():
+    pieces = tape_pieces(painted([(0.12, 0.025), (-0.12, 0.05)]), 'white', K, MOUNT, 0.05,
+                         0.02, step=0.15)
+    assert len(pieces) >= 8
+    for piece in pieces:
+        assert abs(abs(np.mean(piece.y)) - 0.12) < 0.01
+        assert abs(piece.phi) < math.radians(3)  # along the line, near the camera too
+        assert piece.length == pytest.approx(0.15, abs=0.05) or piece.length < 0.15
+
+
+def test_pieces_much_wider_or_narrower_than_the_tape_are_not_kept():
+    # a sheet of A4 paper on the floor and a seam 5 mm wide, for a 5 cm tape
+    mask = painted([(0.0, 0.21)], along=(0.4, 0.697)) | painted([(-0.15, 0.005)])
+    assert tape_pieces(mask, 'white', K, MOUNT, 0.05, 0.02, step=0.15) == []
+    # and a tape of the right width is
+    assert len(tape_pieces(painted([(0.0, 0.05)]), 'white', K, MOUNT, 0.05, 0.02, step=0.15)) > 5
+
+
+# ---------------------------------------------------------------- the lane
+
+def line_pieces(y, colour, along=(0.15, 0.8), bend=0.0, step=0.1, dashed=False):
+    """Pieces of a line at lateral y, bending with curvature `bend` [1/m] (about the robot)."""
+    pieces = []
+    for i, s0 in enumerate(np.arange(along[0], along[1], step)):
+        if dashed and i % 2:
+            continue
+        s = np.linspace(s0, s0 + step, 20)
+        if bend:
+            r = 1 / bend - y  # the line's own radius about the bend's centre (0, 1 / bend)
+            angle = s / abs(1 / bend)
+            x, yy = r * np.sin(angle) * np.sign(bend), 1 / bend - r * np.cos(angle)
+        else:
+            x, yy = s, np.full_like(s, y)
+        phi = math.atan2(yy[-1] - yy[0], x[-1] - x[0])
+        pieces.append(Piece(x, yy, phi, colour, float(np.hypot(np.diff(x), np.diff(yy)).sum()),
+                            0.03))
+    return pieces
+
+
+def test_signed_distance_is_exact_for_arcs_and_lines():
+    rng = np.random.default_rng(0)
+    x, y = rng.uniform(0, 2, 50), rng.uniform(-1, 1, 50)
+    for e, psi, k in [(0.05, 0.3, 2.0), (-0.1, -0.5, -4.0)]:
+        cx, cy = -math.sin(psi) / k, e + math.cos(psi) / k
+        truth = (1 / abs(k) - np.hypot(x - cx, y - cy)) * np.sign(k)
+        assert np.allclose(signed_distance(x, y, e, psi, k), truth, atol=1e-12)
+    assert np.allclose(signed_distance(x, y, 0.1, 0.0, 0.0), y - 0.1)
+
+
+def test_a_straight_lane_is_found_where_it_is():
+    half = DT.lane_width / 2
+    pieces = line_pieces(0.03 + half, 'yellow', dashed=True) + line_pieces(0.03 - half, 'white')
+    fit = find_lane(pieces, DT, DT.lane_width)
+    assert fit.e == pytest.approx(0.03, abs=0.005) and abs(fit.psi) < 0.01
+    assert abs(fit.k) < 0.1 and fit.width == pytest.approx(DT.lane_width, abs=0.005)
+    assert set(fit.sides) == {1, -1}
+
+
+def test_a_bend_is_one_lane():
+    pieces = (line_pieces(DT.lane_width / 2, 'yellow', bend=2.5) +
+              line_pieces(-DT.lane_width / 2, 'white', bend=2.5))
+    fit = find_lane(pieces, DT, DT.lane_width)
+    assert fit.k == pytest.approx(2.5, rel=0.1) and abs(fit.e) < 0.01
+    assert all(fit.sides != 0)
+
+
+def test_the_neighbouring_lane_and_a_wrong_colour_are_not_the_robots():
+    # a two-lane road: the robot in the right lane; the left lane's white edge further left
+    w = DT.lane_width
+    own = line_pieces(w / 2, 'yellow', dashed=True) + line_pieces(-w / 2, 'white')
+    neighbour = line_pieces(1.5 * w, 'white')
+    fit = find_lane(own + neighbour, DT, w)
+    assert abs(fit.e) < 0.01
+    assert list(fit.sides[len(own):]) == [0] * len(neighbour)
+    # the same lines for a profile with two white lines: still the lane the robot is in
+    assert abs(find_lane(own + neighbour, BUILTIN['lecture'], w).e) < 0.01
+
+
+def test_one_line_places_the_lane_half_a_width_beside_it():
+    fit = find_lane(line_pieces(-0.08, 'white'), DT, DT.lane_width)
+    assert fit.e == pytest.approx(-0.08 + DT.lane_width / 2, abs=0.005)
+    assert fit.width == pytest.approx(DT.lane_width, abs=1e-6)
+
+
+def test_lines_further_apart_than_the_profile_are_measured_not_tilted():
+    # a camera pitched a little off sees the lines 20 % further apart; the left line is seen
+    # only far ahead, the right one only near: held to the profile's width, the lane tilts
+    w = 1.2 * DT.lane_width
+    pieces = (line_pieces(w / 2, 'yellow', along=(0.45, 0.8)) +
+              line_pieces(-w / 2, 'white', along=(0.15, 0.45)))
+    fit = find_lane(pieces, DT, DT.lane_width)
+    fixed = find_lane(pieces, DT, DT.lane_width, width_tolerance=0.0)
+    assert fit.width > 1.12 * DT.lane_width and fixed.width == DT.lane_width
+    assert abs(fit.e) < 0.01 and abs(math.degrees(fit.psi)) < 1.0
+    assert abs(fixed.e) > 0.03 and abs(math.degrees(fixed.psi)) > 3.0
+
+
+def test_a_lane_with_a_line_down_its_middle_is_not_chosen():
+    # a white line 5 cm right of the robot, a yellow line beyond the lane width on its left,
+    # and a duck house (white) further right: the house and the yellow would make a lane
+    # with both sides seen, but with the white line inside it
+    w = DT.lane_width
+    pieces = (line_pieces(-0.05, 'white', along=(0.15, 0.8)) +
+              line_pieces(w / 2 + 0.08, 'yellow', along=(0.5, 0.7)) +
+              line_pieces(-w / 2 - 0.06, 'white', along=(0.5, 0.7)))
+    fit = find_lane(pieces, DT, w)
+    assert fit.e == pytest.approx(-0.05 + w / 2, abs=0.01)
+
+
+def test_the_controller_reads_a_rendered_duckietown_lane():
+    # the colour masks, the pieces and the fit together, on a painted floor
+    image = np.full((480, 640, 3), 60, np.uint8)
+    for y, width, colour in ((0.02 + DT.lane_width / 2, 0.025, YELLOW),
+                             (0.02 - DT.lane_width / 2, 0.05, WHITE)):
+        image[painted([(y, width)]) > 0] = colour
+    p = ImprovedParams(lane='duckietown', camera_height=0.10, camera_pitch=20.0,
+                       camera_forward=0.0, roi_near=0.12, roi_far=0.8, memory=0.0)
+    from lanelib.camera import Camera
+    camera = Camera('pinhole', K, np.zeros(5), (640, 480))
+    ctl = ImprovedController(LaneParams(), p, camera)
+    command = ctl(ctl.perceive(image))
+    record = ctl.extra()
+    assert record['offset_m'] == pytest.approx(-0.02, abs=0.01)  # robot right of centre
+    assert abs(record['heading_rad']) < 0.03
+    assert record['lane_width_m'] == pytest.approx(DT.lane_width, abs=0.01)
+    assert command.decision == 'straight' and command.angular_z > 0  # back to the centre
