@@ -15,7 +15,10 @@ a command line, or does anything at import time.
     rospy_standin  a headless stand-in for rospy, for dry runs and tests
     sources        frame sources behind --source; bags: ROS 1 bags in and out
     geometry       the camera's mounting: pixels to floor points and back
-    improved       the improved controller (--controller improved)
+    improved       the improved controller (--controller improved): estimate and steering
+    lanes          lane profiles (--lane): what the lines look like, built in or from YAML
+    colour         colour masks in each frame's light, and the tape pieces they make
+    lanefit        which lines are the robot's lane, and the arc that lane follows
     cli            the command lines' shared conventions (exit status 2 on a usage error)
     sim/           the simulator's world, tracks, base and the simulator frame source
 """

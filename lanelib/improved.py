@@ -20,7 +20,9 @@ Lane memory (`memory` seconds, 0 for none): the camera sees the floor from about
 so the lane between the robot and there is only known from earlier frames. The centre-line
 points of each frame are kept in the frame the robot started in, moved by dead reckoning on the
 commanded motion; they guide the next frame's choice of lane (where the latest
-estimate, extrapolated, can be a lane off at a gap or an S-bend), and steering looks at the
+estimate, extrapolated, can be a lane off at a gap or an S-bend), the points about the robot
+give the offset and heading each new fit is pulled towards (lanefit.find_lane's anchor: the
+lines seen far ahead fix them only through a long lever), and steering looks at the
 remembered centre line `memory_lookahead` ahead instead of the latest fit. With too little
 remembered there (the first frames) it steers on the latest estimate as below. The robot still
 stops after `lost_timeout` without a lane in view, memory or not.
@@ -183,13 +185,15 @@ def arc_points(est, lengths, offset=0.0):
     return x - offset * np.sin(h), y + offset * np.cos(h)
 
 
-def measure_lane(pieces, profile, p, prior=None):
+def measure_lane(pieces, profile, p, prior=None, anchor=None):
     """One frame's LaneEstimate from pieces of line with their colours (lanefit.find_lane),
     or None when less than a quarter lane width's length of the lane's lines is seen or the
     robot would be more than half a lane outside the lane found; and the lanefit.LaneFit it
-    rests on (or None)."""
+    rests on (or None). prior: the LaneEstimate expected; anchor: (offset, heading) of the
+    lane expected at the robot, if known better than the prior's (lanefit.find_lane)."""
     guide = None if prior is None else (prior.a, math.atan(prior.b), prior.curvature)
-    fit = find_lane(pieces, profile, p.lane_width, guide, width_tolerance=p.width_tolerance)
+    fit = find_lane(pieces, profile, p.lane_width, guide, width_tolerance=p.width_tolerance,
+                    anchor=anchor)
     if fit is None or fit.left + fit.right < 0.25 * p.lane_width or abs(fit.e) > fit.width:
         # too little line seen, or a lane the robot would be more than half a lane outside:
         # not the robot's lane
@@ -411,12 +415,16 @@ class ImprovedController:
         self.cluttered = detection.cluttered
         prior = predict(self.estimate, *self.last, self.dt) if self.estimate else None
         guide = prior  # the centre line the segments are sorted to left and right against
+        anchor = None  # where the lane is at the robot: the prior's, or the memory's
         if self.memory is not None:
             self.memory.move(*self.last, self.dt)
             remembered = self.memory.centre_line(0.2, 1.2, 0.3)
             if remembered is not None and prior is not None:
                 guide = replace(prior, a=remembered[0], b=remembered[1], c=remembered[2])
-        meas, fit = measure_lane(detection.pieces, self.profile, p, guide)
+            under = self.memory.centre_line(-0.2, 0.4, 0.2)  # about the robot: no lever
+            if under is not None:
+                anchor = (under[0], math.atan(under[1]))
+        meas, fit = measure_lane(detection.pieces, self.profile, p, guide, anchor)
         self.mark('lane')
         self.last_sides = None if fit is None else fit.sides
         if meas is not None:

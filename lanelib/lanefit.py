@@ -133,11 +133,13 @@ def _sides(distance, allowed, half, tol):
     return np.where((left <= right) & (left < tol), 1, np.where(right < tol, -1, 0))
 
 
-def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tolerance=0.3):
+def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tolerance=0.3,
+              anchor=None):
     """The best-supported lane (LaneFit) among the pieces, or None. prior: (e, psi, k) of the
-    lane expected from earlier frames; every fit is pulled a little towards its offset and
-    heading, and when it, refitted, explains `explained` of the line in view with the robot
-    inside it, the search ends there. The width between the lines is
+    lane expected from earlier frames; when it, refitted, explains `explained` of the line in
+    view with the robot inside it, the search ends there. anchor: (e, psi) the lane is
+    expected to have at the robot (default: the prior's); every fit is pulled a little towards
+    it. The width between the lines is
     fitted within width_tolerance of lane_width (a camera's pitch a little off, a track taped a
     little wider, make the lines look that much further apart: forced to the profile's width
     the lane would tilt to fit them); with one line in view it stays lane_width."""
@@ -155,9 +157,10 @@ def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tole
     # a level camera fits an arc turned the wrong way), which the expected lane steadies
     weights = [0.0, 0.0, 0.002 * total * lane_width ** 4, 0.02 * total]
     target = [0.0, 0.0, 0.0, lane_width]
-    if prior is not None:
+    anchor = anchor if anchor is not None else None if prior is None else prior[:2]
+    if anchor is not None:
         weights[:2] = PRIOR_PULL * total, PRIOR_PULL * total * lane_width ** 2
-        target[:2] = prior[:2]
+        target[:2] = anchor
     priors = (weights, target)
     limits = (lane_width * (1 - width_tolerance), lane_width * (1 + width_tolerance))
     search = (points, allowed, lane_width, priors, limits)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from kobuki_lane import LaneParams, main
-from lanelib.colour import Piece, colour_masks, tape_pieces
+from lanelib.colour import Piece, colour_masks, tape_pieces, view_sides
 from lanelib.geometry import Mounting, floor_to_pixels
 from lanelib.improved import ImprovedController, ImprovedParams
 from lanelib.lanefit import find_lane, signed_distance
@@ -152,6 +152,38 @@ def test_pieces_much_wider_or_narrower_than_the_tape_are_not_kept():
     assert len(tape_pieces(painted([(0.0, 0.05)]), 'white', K, MOUNT, 0.05, 0.02, step=0.15)) > 5
 
 
+def test_a_tape_the_view_cuts_keeps_its_middle():
+    # a tape running out of the side of the view (the robot turned towards it): where the
+    # view's edge cuts it, its pixels stop short of its far edge; those are left out
+    y, width = -0.10, 0.05
+    x = np.linspace(0.12, 1.5, 400)
+    mask = np.zeros((480, 640), np.uint8)
+    yaw = math.radians(35)  # the tape heads 35 degrees to the right of the robot
+    ys = y - np.tan(yaw) * x
+    left = floor_to_pixels(x, ys + width / 2 / math.cos(yaw), K, MOUNT)
+    right = floor_to_pixels(x, ys - width / 2 / math.cos(yaw), K, MOUNT)
+    polygon = np.concatenate([np.stack(left[:2], 1), np.stack(right[:2], 1)[::-1]])
+    cv2.fillPoly(mask, [np.round(polygon).astype(np.int32)], 255)
+    view = np.full_like(mask, 255)
+    cut = tape_pieces(mask, 'white', K, MOUNT, 0.05, 0.02, step=0.15, side=view_sides(view))
+    assert cut
+    for piece in cut:  # its middle on the tape's centre line, within a tenth of its width
+        centre = y - np.tan(yaw) * piece.x
+        assert np.abs(np.mean(piece.y - centre)) * math.cos(yaw) < 0.005
+    # without the view's edge known, the piece at the edge sits off the centre line
+    uncut = tape_pieces(mask, 'white', K, MOUNT, 0.05, 0.02, step=0.15)
+    worst = max(abs(np.mean(p.y - (y - np.tan(yaw) * p.x))) * math.cos(yaw) for p in uncut)
+    assert worst > 0.01
+
+
+def test_a_stop_line_is_never_a_lane_line():
+    scene = floor_scene(tapes=[(100, 12, WHITE)])
+    scene[150:170, 20:300] = (40, 40, 200)  # red, across the lane
+    masks = colour_masks(scene, np.full(scene.shape[:2], 255, np.uint8))
+    assert masks['red'][150:170, 20:300].mean() > 200
+    assert not masks['white'][150:170, 20:300].any() and not masks['any'][150:170, 20:300].any()
+
+
 # ---------------------------------------------------------------- the lane
 
 def line_pieces(y, colour, along=(0.15, 0.8), bend=0.0, step=0.1, dashed=False):
@@ -260,3 +292,15 @@ def test_the_controller_reads_a_rendered_duckietown_lane():
     assert abs(record['heading_rad']) < 0.03
     assert record['lane_width_m'] == pytest.approx(DT.lane_width, abs=0.01)
     assert command.decision == 'straight' and command.angular_z > 0  # back to the centre
+
+
+def test_an_expected_lane_steadies_the_offset_a_far_bend_cannot_fix():
+    # one line seen only far ahead, bending: many arcs through the robot fit it nearly as
+    # well; the offset and heading the lane had at the robot (from memory) pick the right one
+    half = DT.lane_width / 2
+    pieces = line_pieces(-half, 'white', along=(0.6, 1.0), bend=1.5)
+    free = find_lane(pieces, DT, DT.lane_width)
+    anchored = find_lane(pieces, DT, DT.lane_width, anchor=(0.0, 0.0))
+    assert abs(anchored.e) < 0.01 and abs(anchored.psi) < math.radians(2)
+    assert anchored.k == pytest.approx(1.5, rel=0.15)
+    assert abs(free.e) + abs(free.psi) > abs(anchored.e) + abs(anchored.psi)
