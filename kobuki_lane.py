@@ -354,6 +354,9 @@ def build_parser():
     io.add_argument('--bag', metavar='FILE',
                     help=f'record every command sent as geometry_msgs/Twist on {VELOCITY_TOPIC} '
                          'in a new ROS 1 bag (complete even after Ctrl-C)')
+    io.add_argument('--force', action='store_true',
+                    help='replace --decisions, --video and --bag files that exist already '
+                         '(without it, an existing file is refused before anything runs)')
     io.add_argument('--bag-images', action='store_true',
                     help='also record the annotated frames in the bag, as '
                          'sensor_msgs/CompressedImage on /kobuki_lane/debug_image/compressed')
@@ -393,10 +396,12 @@ def check_arguments(args):
         fail(PROG, f"--stages '{args.stages}': folder is not writable")
     if args.bag_images and not args.bag:
         fail(PROG, '--bag-images needs --bag FILE')
-    for path, what in ((args.decisions, '--decisions'), (args.video, '--video'),
-                       (args.bag, '--bag')):
-        if path:
-            check_output(PROG, path, what)
+    outputs = [(path, what) for path, what in ((args.decisions, '--decisions'),
+                                                (args.video, '--video'), (args.bag, '--bag'))
+               if path]
+    for path, what in outputs:
+        check_output(PROG, path, what)
+    check_outputs_apart(args.source, outputs, args.stages, args.force)
     if args.show:
         if not os.environ.get('DISPLAY') and not os.environ.get('WAYLAND_DISPLAY'):
             fail(PROG, '--show needs a display (DISPLAY is not set); use --video FILE instead')
@@ -405,6 +410,32 @@ def check_arguments(args):
         except cv2.error:
             fail(PROG, '--show needs an OpenCV build with GUI support (pip install '
                        'opencv-python instead of opencv-python-headless); use --video FILE')
+
+
+def check_outputs_apart(source, outputs, stages, force):
+    """Refuse an output that would destroy an input or another output: one that is the
+    source file, lies in the source folder (it would be read as a frame), is named twice, or
+    exists already (unless `force`); and a --stages folder that is the source folder."""
+    where = os.path.realpath(source) if os.path.exists(source) else None
+    seen = {}
+    for path, what in outputs:
+        real = os.path.realpath(path)
+        if where and real == where:
+            fail(PROG, f"{what} '{path}' is the --source itself: writing it would destroy it")
+        if where and os.path.isdir(where) and os.path.dirname(real) == where:
+            fail(PROG, f"{what} '{path}' is inside the --source folder, where it would be read "
+                       'as a frame; write it elsewhere')
+        if real in seen:
+            fail(PROG, f"{what} and {seen[real]} are the same file '{path}'")
+        seen[real] = what
+        if os.path.isdir(real):
+            fail(PROG, f"{what} '{path}' is a folder; give a file name")
+        if os.path.exists(real) and not force:
+            fail(PROG, f"{what} '{path}' exists already; remove it, choose another name, or "
+                       'add --force to replace it')
+    if stages and where and os.path.realpath(stages) == where:
+        fail(PROG, f"--stages '{stages}' is the --source folder; its pictures would be read as "
+                   'frames')
 
 
 def connect(args, private):
@@ -436,6 +467,8 @@ def open_outputs(args, params, ros, source, controller):
         from lanelib.bags import BagError, BagRecorder
 
         try:
+            if args.force and os.path.isfile(args.bag):
+                os.remove(args.bag)  # --force: replaced, as the other outputs are
             bag = BagRecorder(args.bag, VELOCITY_TOPIC, images=args.bag_images)
         except BagError as e:
             source.release()

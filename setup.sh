@@ -33,7 +33,7 @@ requirements=requirements.txt
 if [ "$job" = demo ]; then
   mkdir -p out
   exec .venv/bin/python kobuki_lane.py --source samples/track --dry-run --calibration lecture \
-    --decisions out/decisions.jsonl --video out/annotated.avi
+    --decisions out/decisions.jsonl --video out/annotated.avi --force
 else
   exec .venv/bin/python -m pytest "${@:2}"
 fi

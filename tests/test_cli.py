@@ -77,9 +77,9 @@ def test_video_pattern_and_single_image_sources(tmp_path):
     for f in frames:
         writer.write(f)
     writer.release()
-    for source, n in ((str(video), 5), (str(tmp_path / 'f%04d.png'), 5),
-                      (str(tmp_path / 'f0002.png'), 1)):
-        out = tmp_path / 'd.jsonl'
+    for k, (source, n) in enumerate(((str(video), 5), (str(tmp_path / 'f%04d.png'), 5),
+                                     (str(tmp_path / 'f0002.png'), 1))):
+        out = tmp_path / f'd{k}.jsonl'
         assert main(['--source', source, '--dry-run', '--decisions', str(out), '--quiet']) == 0
         records = read_jsonl(out)
         assert len(records) == n, source
@@ -222,7 +222,7 @@ def test_private_params_and_flag_precedence(tmp_path):
     assert {r['decision'] for r in with_param} >= {'left', 'right'}
     # ... and a flag wins over the parameter
     assert main(['--source', SAMPLES, '--dry-run', '_threshold:=0.3', '--threshold', '6',
-                 '--decisions', str(out), '--quiet']) == 0
+                 '--decisions', str(out), '--force', '--quiet']) == 0
     assert all(r['decision'] == expected(r) for r in read_jsonl(out))
 
 
@@ -324,13 +324,15 @@ def test_a_truncated_video_is_read_as_far_as_it_goes(tmp_path):
 
 def test_a_folder_of_mixed_sizes_and_kinds(tmp_path):
     frame = cv2.imread(os.path.join(SAMPLES, '010_B.jpg'))
-    cv2.imwrite(str(tmp_path / 'a.png'), frame)
-    cv2.imwrite(str(tmp_path / 'b.png'), cv2.resize(frame, (320, 240)))
-    cv2.imwrite(str(tmp_path / 'c.png'), cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY))
-    cv2.imwrite(str(tmp_path / 'd.png'), cv2.resize(frame, (1280, 720)))
-    cv2.imwrite(str(tmp_path / 'e.png'), frame)
+    folder = tmp_path / 'frames'
+    folder.mkdir()
+    cv2.imwrite(str(folder / 'a.png'), frame)
+    cv2.imwrite(str(folder / 'b.png'), cv2.resize(frame, (320, 240)))
+    cv2.imwrite(str(folder / 'c.png'), cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY))
+    cv2.imwrite(str(folder / 'd.png'), cv2.resize(frame, (1280, 720)))
+    cv2.imwrite(str(folder / 'e.png'), frame)
     out = tmp_path / 'd.jsonl'
-    assert main(['--source', str(tmp_path), '--dry-run', '--decisions', str(out),
+    assert main(['--source', str(folder), '--dry-run', '--decisions', str(out),
                  '--quiet']) == 0
     records = read_jsonl(out)
     assert len(records) == 5 and 'error' not in str(records)
@@ -363,3 +365,43 @@ def test_stages_writes_every_stage_and_a_sheet(tmp_path):
     assert sheet.shape[1] == 4 * 320
     proc = cli('--source', str(frames), '--dry-run', '--stages', str(tmp_path / 'missing'))
     assert proc.returncode == 2 and 'no such folder' in proc.stderr
+
+
+def test_an_output_never_destroys_an_input_or_another_output(tmp_path):
+    """Issue 16, cases 1 and 2: refused at start, exit 2, the files untouched."""
+    video = tmp_path / 'run.avi'
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*'MJPG'), 4, (640, 480))
+    for name in sorted(os.listdir(SAMPLES))[:6]:
+        writer.write(cv2.imread(os.path.join(SAMPLES, name)))
+    writer.release()
+    size = video.stat().st_size
+    existing = tmp_path / 'old.jsonl'
+    existing.write_text('{"kept": true}\n')
+    frames = tmp_path / 'frames'
+    frames.mkdir()
+    for name in sorted(os.listdir(SAMPLES))[:3]:
+        shutil.copy(os.path.join(SAMPLES, name), frames / name)
+    cases = [
+        (['--source', str(video), '--decisions', str(video)], 'is the --source itself'),
+        (['--source', str(video), '--video', str(video)], 'is the --source itself'),
+        (['--source', str(video), '--decisions', str(tmp_path / 'a.x'),
+          '--video', str(tmp_path / 'a.x')], 'are the same file'),
+        (['--source', str(video), '--decisions', str(existing)], 'exists already'),
+        (['--source', str(frames), '--decisions', str(frames / 'd.jsonl')],
+         'inside the --source folder'),
+        (['--source', str(frames), '--stages', str(frames)], 'is the --source folder'),
+        (['--source', str(video), '--decisions', str(tmp_path)], 'is a folder'),
+    ]
+    for args, message in cases:
+        proc = cli(*args, '--dry-run', '--quiet')
+        assert proc.returncode == 2, (args, proc.stderr)
+        assert message in proc.stderr and 'Traceback' not in proc.stderr, proc.stderr
+    assert video.stat().st_size == size
+    assert existing.read_text() == '{"kept": true}\n'
+    assert sorted(os.listdir(frames)) == sorted(os.listdir(SAMPLES))[:3]
+    # --force replaces an existing output, and says so in --help
+    proc = cli('--source', str(video), '--decisions', str(existing), '--force', '--dry-run',
+               '--quiet')
+    assert proc.returncode == 0, proc.stderr
+    assert len(read_jsonl(existing)) == 6
+    assert '--force' in cli('--help').stdout
