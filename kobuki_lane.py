@@ -48,12 +48,12 @@ from lanelib.cli import check_output, fail
 from lanelib.fast import FastPipeline
 from lanelib.improved import ImprovedController, ImprovedParams
 from lanelib.outputs import Outputs, Progress, VideoSink, decision_record, summary
-from lanelib.robot import STOP, VELOCITY_TOPIC, Command
+from lanelib.robot import MAX_ANGULAR, MAX_LINEAR, STOP, VELOCITY_TOPIC, Command
 from lanelib.ros import MasterWatch, RosUnavailable, connect_ros, debug_publisher, split_ros_args
 from lanelib.rospy_standin import SimClock, StandInRospy, WallClock
 from lanelib.rospy_standin import Twist as StandInTwist
 from lanelib.safety import SafeBase, Safety, camera_back, install_signal_handlers
-from lanelib.settings import add_arguments, finite, positive, resolve, setting
+from lanelib.settings import above, add_arguments, between, resolve, setting
 from lanelib.sources import Prefetch, SourceError, open_source
 from lanelib.stages import (
     Detection,
@@ -75,31 +75,37 @@ class LaneParams:
                              "before Hough; '1.0' does not (the lecture's first demo)",
                              choices=('1.0', '1.1'))
     blur_kernel: int = setting(5, 'GaussianBlur kernel size, odd (lecture: (5, 5), sigma 0)',
-                               'px', lambda k: k > 0 and k % 2 == 1)
+                               'px', between(1, 31, odd=True))
     canny_low: float = setting(85.0, 'Canny lower hysteresis threshold (lecture: 85)', '',
-                               finite)
+                               between(0, 2040))
     canny_high: float = setting(85.0, 'Canny upper hysteresis threshold (lecture: 85)', '',
-                                finite)
+                                between(0, 2040))
     hough_rho: float = setting(6.0, 'HoughLinesP distance resolution (lecture: rho=6)', 'px',
-                               positive)
+                               above(0, 100))
     hough_theta: float = setting(math.pi / 60, 'HoughLinesP angle resolution '
-                                 '(lecture: theta=pi/60)', 'rad', positive)
+                                 '(lecture: theta=pi/60)', 'rad', above(0, math.pi))
     hough_threshold: int = setting(160, 'HoughLinesP accumulator votes (lecture: 160)', 'votes',
-                                   positive)
+                                   between(1, 100000))
     min_line_length: float = setting(40.0, 'HoughLinesP minLineLength (lecture: 40)', 'px',
-                                     finite)
-    max_line_gap: float = setting(25.0, 'HoughLinesP maxLineGap (lecture: 25)', 'px', finite)
+                                     between(0, 10000))
+    max_line_gap: float = setting(25.0, 'HoughLinesP maxLineGap (lecture: 25)', 'px',
+                                  between(0, 10000))
     slope_min: float = setting(0.5, 'segments with |slope| below this join neither slope group '
-                               '(lecture: 0.5)', '', finite)
+                               '(lecture: 0.5)', '', between(0, 1000))
     threshold: float = setting(6.0, 'theta above +threshold turns left, below -threshold right '
-                               '(lecture: threshold = 6)', 'rad, summed', finite)
+                               '(lecture: threshold = 6)', 'rad, summed', between(0, 10000))
+    # speeds: forward only, and no faster than the Kobuki goes (lanelib/robot.py)
     turn_linear: float = setting(0.01, 'forward speed while turning (lecture: 0.01)', 'm/s',
-                                 finite)
+                                 between(0, MAX_LINEAR))
     turn_angular: float = setting(0.06, 'turn rate; left +, right - (lecture: 0.06)', 'rad/s',
-                                  finite)
+                                  between(0, MAX_ANGULAR))
     straight_linear: float = setting(0.05, 'forward speed going straight (lecture: 0.05)', 'm/s',
-                                     finite)
-    rate: float = setting(4.0, 'loop and publish rate (lecture: rospy.Rate(4))', 'Hz', positive)
+                                     between(0, MAX_LINEAR))
+    # at 2.5 Hz and below the commands come as far apart as the watchdog's 0.4 s or further,
+    # and it would stop the robot between every two of them
+    rate: float = setting(4.0, 'loop and publish rate (lecture: rospy.Rate(4)); not below 3, '
+                          "where the watchdog's stops would come between the commands", 'Hz',
+                          between(3, 100))
 
 
 # ---------------------------------------------------------------- the lecture's pipeline

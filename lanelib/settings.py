@@ -26,6 +26,24 @@ def setting(default, help, unit='', check=None, choices=None):
                              metadata=dict(help=help, unit=unit, check=check, choices=choices))
 
 
+def between(low, high, odd=False):
+    """A check: low <= x <= high (and odd, for a kernel size). Its range is shown in --help and
+    in the error that refuses a value outside it."""
+    def check(x):
+        return (math.isfinite(x) and low <= x <= high and
+                (not odd or (x == int(x) and int(x) % 2 == 1)))
+    check.range = f"{'odd, ' if odd else ''}{low:g} to {high:g}"
+    return check
+
+
+def above(low, high):
+    """A check: low < x <= high."""
+    def check(x):
+        return math.isfinite(x) and low < x <= high
+    check.range = f'more than {low:g}, at most {high:g}'
+    return check
+
+
 def positive(x):
     return math.isfinite(x) and x > 0
 
@@ -59,7 +77,9 @@ def validate(params):
         except ValueError as e:  # a check that says itself what is wrong
             raise ValueError(f'{f.name}: {e}') from None
         if not ok:
-            raise ValueError(f'{f.name} = {value!r} is out of range: {meta["help"]}')
+            within = getattr(meta['check'], 'range', None)
+            raise ValueError(f'{f.name} = {value!r} is out of range'
+                             f'{f" ({within})" if within else ""}: {meta["help"]}')
     return params
 
 
@@ -69,9 +89,11 @@ def add_arguments(group, table):
         meta, kind = f.metadata, _kind(f)
         unit = f' [{meta["unit"]}]' if meta['unit'] else ''
         default = f.default if kind is str else f'{f.default:g}'
+        within = getattr(meta['check'], 'range', None)
         group.add_argument('--' + f.name.replace('_', '-'), dest=f.name, type=kind, default=None,
                            choices=meta['choices'], metavar=None if meta['choices'] else 'X',
-                           help=f'{meta["help"]}{unit}; default {default}')
+                           help=f'{meta["help"]}{unit}; default {default}'
+                                f'{f"; {within}" if within else ""}')
 
 
 def resolve(table, args, get_param):
