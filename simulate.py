@@ -144,6 +144,22 @@ def benchmark_table(results):
     return '\n'.join(rows) + '\n'
 
 
+def ranged(low, high, kind=float, open_low=False):
+    """An argparse type: a finite number from low to high (more than low if open_low)."""
+    def parse(text):
+        try:
+            value = kind(text)
+        except ValueError:
+            value = None
+        if value is None or not math.isfinite(value) or value > high or (
+                value <= low if open_low else value < low):
+            raise argparse.ArgumentTypeError(
+                f"'{text}' is not a number {'above' if open_low else 'from'} {low:g} "
+                f"{'and at most' if open_low else 'to'} {high:g}")
+        return value
+    return parse
+
+
 def tape_option(first, second, example):
     """An argparse type for LINE:<first>:<second> (metres), e.g. --gap left:2.0:0.2."""
     def parse(text):
@@ -165,33 +181,41 @@ def build_parser():
                         help="what the floor looks like (default: the track file's, or lecture)")
     parser.add_argument('--controller', choices=('lecture', 'improved'), default='lecture',
                         help="the lecture's rule (default) or the improved controller")
-    parser.add_argument('--seed', type=int, default=0, help='frame noise seed (default 0)')
+    parser.add_argument('--seed', type=ranged(0, 10**9, int), default=0,
+                        help='frame noise seed, 0 to 10^9 (default 0)')
     parser.add_argument('--json', metavar='FILE', help='write the run metrics as JSON')
     parser.add_argument('--plot', metavar='FILE', help='write the top-down view as PNG')
     parser.add_argument('--video', metavar='FILE',
                         help='write onboard (annotated) beside top-down view, .avi or .mp4')
-    parser.add_argument('--time-limit', type=float, metavar='S',
-                        help='end the run here (default: track length / 0.04 m/s + 30 s)')
+    parser.add_argument('--time-limit', type=ranged(0, 1e5, open_low=True), metavar='S',
+                        help='end the run here, above 0 (default: track length / 0.04 m/s + 30 s)')
     parser.add_argument('--continue', dest='keep_going', action='store_true',
                         help='drive on after a departure instead of ending the run')
     scene = parser.add_argument_group('scene and robot (override the track file)')
-    scene.add_argument('--noise', type=float, help='frame noise sigma [grey levels]')
-    scene.add_argument('--gradient', type=float, help='lighting gradient [grey levels]')
-    scene.add_argument('--glare', type=float, help='glare patch brightness [grey levels]')
+    scene.add_argument('--noise', type=ranged(0, 100),
+                       help='frame noise sigma [grey levels], 0 to 100')
+    scene.add_argument('--gradient', type=ranged(0, 255),
+                       help='lighting gradient [grey levels], 0 to 255')
+    scene.add_argument('--glare', type=ranged(0, 255),
+                       help='glare patch brightness [grey levels], 0 to 255')
     scene.add_argument('--gap', type=tape_option('at', 'length', 'left:2.0:0.2'),
                        action='append', default=[],
                        metavar='LINE:AT:LENGTH', help='tape missing, e.g. left:2.0:0.2 [m]')
     scene.add_argument('--dashes', type=tape_option('on', 'off', 'both:0.1:0.1'),
                        metavar='LINE:ON:OFF',
                        help='dashed tape, e.g. both:0.1:0.1 [m]')
-    scene.add_argument('--camera-height', type=float, help='[m]')
-    scene.add_argument('--camera-pitch', type=float, help='down from horizontal [deg]')
-    scene.add_argument('--start-offset', type=float, default=0.0, help='[m], + left')
-    scene.add_argument('--start-yaw', type=float, default=0.0, help='[deg], + left')
-    scene.add_argument('--accel', type=float, default=0.0,
-                       help='base acceleration limit [m/s^2], 0 for none')
-    scene.add_argument('--latency', type=float, default=0.05,
-                       help='publish to wheels [s] (default 0.05)')
+    scene.add_argument('--camera-height', type=ranged(0, 2, open_low=True),
+                       help='[m], above 0, at most 2')
+    scene.add_argument('--camera-pitch', type=ranged(-45, 80),
+                       help='down from horizontal [deg], -45 to 80')
+    scene.add_argument('--start-offset', type=ranged(-1, 1), default=0.0,
+                       help='[m], + left, -1 to 1')
+    scene.add_argument('--start-yaw', type=ranged(-90, 90), default=0.0,
+                       help='[deg], + left, -90 to 90')
+    scene.add_argument('--accel', type=ranged(0, 10), default=0.0,
+                       help='base acceleration limit [m/s^2], 0 for none, at most 10')
+    scene.add_argument('--latency', type=ranged(0, 2), default=0.05,
+                       help='publish to wheels [s], 0 to 2 (default 0.05)')
     bench = parser.add_argument_group('benchmark')
     bench.add_argument('--benchmark', action='store_true',
                        help="run every built-in track x {lecture, improved} in the lecture's "
@@ -200,7 +224,8 @@ def build_parser():
                             'table (--json writes all results)')
     bench.add_argument('--worlds', nargs='+', choices=sorted(WORLDS), metavar='WORLD',
                        help='with --benchmark: only these worlds')
-    bench.add_argument('--jobs', type=int, default=2, help='parallel runs (default 2)')
+    bench.add_argument('--jobs', type=ranged(1, 64, int), default=2,
+                       help='parallel runs, 1 to 64 (default 2)')
     parser.add_argument('--list-tracks', action='store_true', help='list the built-in tracks')
     return parser
 

@@ -225,6 +225,18 @@ def test_track_files_yaml_json_and_builtins(tmp_path):
         load_track(str(tmp_path / 'bad.yaml'))
 
 
+def test_the_documented_dashes_yaml_reads_and_segment_errors_are_clean(tmp_path):
+    # issue 16, case 11: YAML 1.1 reads the keys on and off as booleans
+    (tmp_path / 'd.yaml').write_text('segments:\n  - straight: 2.0\n'
+                                     'scene:\n  dashes: {line: left, on: 0.1, off: 0.15}\n')
+    spec = load_track(str(tmp_path / 'd.yaml'))
+    assert spec.dashes == {'line': 'left', 'on': 0.1, 'off': 0.15}
+    (tmp_path / 'e.yaml').write_text('segments:\n  - curve: 1.0\n')
+    with pytest.raises(TrackError) as e:
+        load_track(str(tmp_path / 'e.yaml'))
+    assert str(e.value).endswith('{arc: {radius: m, angle_deg: deg}}')
+
+
 def test_simulate_command_line_writes_json_plot_and_video(tmp_path, capsys):
     track = tmp_path / 'short.json'
     track.write_text(json.dumps(SHORT))
@@ -251,6 +263,20 @@ def test_simulate_rejects_a_bad_track_with_status_2(tmp_path, capsys):
         simulate.main(['--track', str(bad)])
     assert e.value.code == 2
     assert 'segments[0].straight must be positive' in capsys.readouterr().err
+
+
+@pytest.mark.parametrize('args', [['--noise', 'nan'], ['--noise', '-1'], ['--latency', '-1'],
+                                  ['--accel', 'nan'], ['--camera-height', '0'],
+                                  ['--camera-pitch', '90'], ['--start-offset', 'inf'],
+                                  ['--time-limit', '0'], ['--time-limit', 'nan'],
+                                  ['--seed', '-1'], ['--jobs', '0']])
+def test_simulate_refuses_nonsense_numbers_at_start(args, capsys):
+    # issue 16, cases 9 and 10: these ran and exited 0 ('RMS nan cm') or raised a traceback
+    with pytest.raises(SystemExit) as e:
+        simulate.main(['--track', 'lecture', *args])
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert args[0] in err and 'Traceback' not in err
 
 
 def test_the_node_runs_the_improved_controller(tmp_path):

@@ -96,8 +96,8 @@ def _segments(value, where):
     for i, seg in enumerate(value):
         here = f'{where}.segments[{i}]'
         if not isinstance(seg, dict) or len(seg) != 1 or next(iter(seg)) not in ('straight', 'arc'):
-            raise TrackError(f"{here} must be {{straight: metres}} or {{arc: {{radius: m, "
-                             "angle_deg: deg}}}}")
+            raise TrackError(f'{here} must be {{straight: metres}} or '
+                             '{arc: {radius: m, angle_deg: deg}}')
         if 'straight' in seg:
             out.append({'straight': _number(seg['straight'], f'{here}.straight', positive=True)})
         else:
@@ -154,7 +154,10 @@ def from_dict(doc, name='track'):
     dashes = None
     if sc.get('dashes') is not None:
         here = f'{name}.scene.dashes'
-        d = _mapping(sc['dashes'], here, ('line', 'on', 'off'))
+        d = sc['dashes']
+        if isinstance(d, dict):  # YAML 1.1 reads the keys on and off as true and false
+            d = {('on' if k is True else 'off' if k is False else k): v for k, v in d.items()}
+        d = _mapping(d, here, ('line', 'on', 'off'))
         dashes = dict(line=_line_choice(d.get('line', 'both'), f'{here}.line'),
                       on=_number(d.get('on'), f'{here}.on', positive=True),
                       off=_number(d.get('off'), f'{here}.off', positive=True))
