@@ -439,6 +439,16 @@ def check_outputs_apart(source, outputs, stages, force):
         if os.path.exists(real) and not force:
             fail(PROG, f"{what} '{path}' exists already; remove it, choose another name, or "
                        'add --force to replace it')
+        if what == '--video' and os.path.splitext(path)[1].lower() not in ('.avi', '.mp4'):
+            fail(PROG, f"--video '{path}': give a name ending in .avi or .mp4")
+        existed = os.path.exists(real)
+        try:  # opened for appending, so nothing in it is lost; made now, removed again
+            with open(real, 'a', encoding='utf-8'):
+                pass
+        except OSError as e:
+            fail(PROG, f"{what} '{path}': cannot write it ({e.strerror})")
+        if not existed:
+            os.remove(real)
     if stages and where and os.path.realpath(stages) == where:
         fail(PROG, f"--stages '{stages}' is the --source folder; its pictures would be read as "
                    'frames')

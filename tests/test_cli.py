@@ -392,6 +392,10 @@ def test_an_output_never_destroys_an_input_or_another_output(tmp_path):
          'inside the --source folder'),
         (['--source', str(frames), '--stages', str(frames)], 'is the --source folder'),
         (['--source', str(video), '--decisions', str(tmp_path)], 'is a folder'),
+        # issue 16, cases 8 and 9: found before the first frame, not at it, and no traceback
+        (['--source', str(video), '--decisions', '/proc/x.jsonl'], 'cannot write it'),
+        (['--source', str(video), '--video', str(tmp_path / 'novideo')],
+         'ending in .avi or .mp4'),
     ]
     for args, message in cases:
         proc = cli(*args, '--dry-run', '--quiet')
