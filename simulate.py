@@ -37,6 +37,7 @@ did not (a departure, a stall, the time limit), 2 bad arguments or track file.
 import argparse
 import json
 import math
+import os
 import sys
 
 import cv2
@@ -231,9 +232,17 @@ def build_parser():
 
 
 def check_outputs(args):
+    """Refuse, before the run, an output that is a folder or has a name its writer cannot use
+    (a --plot without an image extension failed in OpenCV after the whole run)."""
+    endings = {'--plot': ('.png', '.jpg', '.jpeg', '.bmp'), '--video': ('.avi', '.mp4')}
     for path, what in ((args.json, '--json'), (args.plot, '--plot'), (args.video, '--video')):
         if path:
             check_output(PROG, path, what)
+            if os.path.isdir(path):
+                fail(PROG, f"{what} '{path}' is a folder; give a file name")
+            if what in endings and not path.lower().endswith(endings[what]):
+                fail(PROG, f"{what} '{path}': give a name ending in "
+                           f"{' or '.join(endings[what])}")
 
 
 def customise(spec, args):

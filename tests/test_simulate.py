@@ -279,6 +279,19 @@ def test_simulate_refuses_nonsense_numbers_at_start(args, capsys):
     assert args[0] in err and 'Traceback' not in err
 
 
+def test_simulate_refuses_outputs_it_cannot_write_before_the_run(tmp_path, capsys):
+    # issue 16, case 9: --json onto a folder was a traceback, --plot without an extension a
+    # cv2.error after the whole run (and the JSON never written)
+    for args, message in ((['--json', str(tmp_path)], 'is a folder'),
+                          (['--plot', str(tmp_path / 'p')], 'ending in .png'),
+                          (['--video', str(tmp_path / 'v.mkv')], 'ending in .avi')):
+        with pytest.raises(SystemExit) as e:
+            simulate.main(['--track', 'lecture', *args])
+        assert e.value.code == 2
+        err = capsys.readouterr().err
+        assert message in err and 'Traceback' not in err, err
+
+
 def test_the_node_runs_the_improved_controller(tmp_path):
     out = tmp_path / 'd.jsonl'
     assert node_main(['--source', SAMPLES, '--dry-run', '--controller', 'improved',
