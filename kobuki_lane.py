@@ -375,7 +375,7 @@ def build_parser():
     io.add_argument('--progress', choices=('auto', 'on', 'off'), default='auto',
                     help='progress line on stderr (auto: when stderr is a terminal)')
     io.add_argument('--quiet', action='store_true', help='no per-frame log lines')
-    io.add_argument('--wait-for-base', type=float, default=2.0, metavar='SECONDS',
+    io.add_argument('--wait-for-base', type=seconds, default=2.0, metavar='SECONDS',
                     help='on ROS, wait this long for a subscriber (the Kobuki base) before '
                          'the first command (default: 2)')
     io.add_argument('--controller', choices=('lecture', 'improved'), default=None,
@@ -392,6 +392,17 @@ def build_parser():
                   ImprovedParams)
     add_arguments(parser.add_argument_group('safety'), Safety)
     return parser
+
+
+def seconds(text):
+    """An argparse type: a time from 0 to an hour."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0 <= value <= 3600:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a number of seconds from 0 to 3600")
+    return value
 
 
 def check_arguments(args):
@@ -474,6 +485,10 @@ def settings_from(args, get_param):
     safety = resolve(Safety, args, get_param)
     name = args.controller or str(get_param('~controller', 'lecture'))
     improved = resolve(ImprovedParams, args, get_param) if name == 'improved' else None
+    if 1.0 / params.rate >= safety.watchdog:  # its stops would come between the commands
+        raise ValueError(f'rate {params.rate:g} Hz sends a command every {1 / params.rate:.2f} s, '
+                         f'but the watchdog stops the robot after {safety.watchdog:g} s without '
+                         'one: raise the rate or the watchdog')
     return params, safety, name, improved
 
 

@@ -22,7 +22,7 @@ import time
 from dataclasses import dataclass
 
 from lanelib.robot import STOP, VELOCITY_TOPIC, within_limits
-from lanelib.settings import finite, positive, setting
+from lanelib.settings import between, positive, setting
 
 WATCHDOG_MAX = 0.5  # [s] 0.1 s inside the Kobuki driver's 0.6 s (robot.COMMAND_TIMEOUT)
 
@@ -42,7 +42,8 @@ class Safety:
     watchdog_check: float = setting(0.1, 'how often the watchdog looks', 's',
                                     below_kobuki_timeout)
     camera_retry: float = setting(5.0, 'a live camera that stops giving frames is reopened for '
-                                  'this long before the run ends (exit status 1)', 's', finite)
+                                  'this long before the run ends (exit status 1)', 's',
+                                  between(0, 3600))
     max_errors: int = setting(5, 'this many frames in a row failing in the pipeline end the run '
                               '(exit status 1)', 'frames', positive)
 

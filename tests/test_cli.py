@@ -342,7 +342,9 @@ def test_a_folder_of_mixed_sizes_and_kinds(tmp_path):
 
 @pytest.mark.parametrize('args', [['--watchdog', '0.7'], ['--watchdog', '0'],
                                   ['--controller', 'nope'], ['--camera-retry', 'nan'],
-                                  ['--max-errors', '0']])
+                                  ['--max-errors', '0'], ['--camera-retry', '-1'],
+                                  ['--wait-for-base', 'nan'], ['--wait-for-base', '-1'],
+                                  ['--watchdog', '0.2', '--rate', '4']])
 def test_bad_safety_and_controller_values_are_errors(args):
     proc = cli('--source', SAMPLES, '--dry-run', *args)
     assert proc.returncode == 2
