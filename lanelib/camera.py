@@ -7,10 +7,13 @@ as LECTURE_CAMERA. Any other camera is loaded from the YAML layout that ROS's
 """
 
 import math
+import os
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
+
+from lanelib.settings import read_yaml
 
 
 class CalibrationError(ValueError):
@@ -110,16 +113,10 @@ def _matrix(doc, field, rows, cols, path):
 
 def read_camera_info(path):
     """Read the YAML that ROS's camera_calibration writes; errors name the field at fault."""
-    import yaml  # Debian's python3-yaml, which rospy itself needs
-
-    try:
-        with open(path, encoding='utf-8') as f:
-            doc = yaml.safe_load(f)
-    except FileNotFoundError:
+    if not os.path.exists(path):
         raise CalibrationError(f"{path}: no such calibration file "
-                               "(use --calibration lecture, none, or a camera_info YAML)") from None
-    except (OSError, yaml.YAMLError) as e:
-        raise CalibrationError(f"{path}: cannot read as YAML: {e}") from None
+                               "(use --calibration lecture, none, or a camera_info YAML)")
+    doc = read_yaml(path, CalibrationError)
     if not isinstance(doc, dict):
         raise CalibrationError(f"{path}: not a camera_info YAML mapping")
     size = []

@@ -259,30 +259,37 @@ class LaneMemory:
         self.pose = np.zeros(3)  # x, y, yaw of the robot in the start frame
         self.t = 0.0
         self.chunks = []  # (time, X, Y, weight)
+        self._local = None  # local()'s answer until the robot moves or points come or go
 
     def move(self, v, omega, dt):
         self.pose = np.array(arc_step(*self.pose, v, omega, dt))
         self.t += dt
         self.chunks = [c for c in self.chunks if self.t - c[0] <= self.seconds]
+        self._local = None
 
     def add(self, x, y, w):
         px, py, yaw = self.pose
         cos, sin = math.cos(yaw), math.sin(yaw)
         self.chunks.append((self.t, px + cos * x - sin * y, py + sin * x + cos * y, w))
+        self._local = None
 
     def local(self):
-        """All remembered points in the robot's frame now: x, y, weight."""
-        if not self.chunks:
-            return np.empty(0), np.empty(0), np.empty(0)
-        px, py, yaw = self.pose
-        X = np.concatenate([c[1] for c in self.chunks]) - px
-        Y = np.concatenate([c[2] for c in self.chunks]) - py
-        w = np.concatenate([c[3] for c in self.chunks])
-        cos, sin = math.cos(yaw), math.sin(yaw)
-        return cos * X + sin * Y, -sin * X + cos * Y, w
+        """All remembered points in the robot's frame now: x, y, weight (worked out once per
+        pose and set of points: a frame asks for them up to three times)."""
+        if self._local is None:
+            if not self.chunks:
+                return np.empty(0), np.empty(0), np.empty(0)
+            px, py, yaw = self.pose
+            X = np.concatenate([c[1] for c in self.chunks]) - px
+            Y = np.concatenate([c[2] for c in self.chunks]) - py
+            w = np.concatenate([c[3] for c in self.chunks])
+            cos, sin = math.cos(yaw), math.sin(yaw)
+            self._local = (cos * X + sin * Y, -sin * X + cos * Y, w)
+        return self._local
 
     def clear(self):
         self.chunks = []
+        self._local = None
 
     def centre_line(self, near, far, min_span, outlier=None):
         """(a, b, c) of the remembered centre line fitted between near and far metres ahead,
@@ -345,6 +352,7 @@ class ImprovedController:
         self._roi = {}  # mask per (camera, width, height)
         self.lane_params = lane_params
         self._layout = None  # the floor band's undistortion, the fast pipeline's way
+        self._sides = None  # (band key, view_sides of the floor band)
         # the estimate, the time since the lane was last seen [s], the last command (v, omega)
         # and the lane memory
         self.reset()
@@ -398,7 +406,11 @@ class ImprovedController:
         self.mark('undistort')
         masks = colour_masks(band, floor)
         self.mark('colour')
-        p, pieces, side = self.p, [], view_sides(floor)
+        p, pieces = self.p, []
+        key = (id(roi), first, len(band))  # the band's edge: the same for every frame of a size
+        if self._sides is None or self._sides[0] != key:
+            self._sides = (key, view_sides(floor))
+        side = self._sides[1]
         for colour in self.profile.colours:
             tape = max(line.width for line in (self.profile.left, self.profile.right)
                        if line.colour == colour)

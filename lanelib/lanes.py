@@ -27,6 +27,8 @@ import math
 import os
 from dataclasses import dataclass
 
+from lanelib.settings import read_yaml
+
 COLOURS = ('white', 'yellow', 'any')
 STYLES = ('solid', 'dashed')
 
@@ -118,11 +120,4 @@ def load_lane(spec):
     if not os.path.isfile(spec):
         raise LaneError(f"lane '{spec}' is neither a built-in profile ({', '.join(BUILTIN)}) "
                         'nor an existing file')
-    import yaml
-
-    try:
-        with open(spec, encoding='utf-8') as f:
-            doc = yaml.safe_load(f)
-    except (OSError, yaml.YAMLError) as e:
-        raise LaneError(f'{spec}: cannot read as YAML: {e}') from None
-    return from_dict(doc, os.path.basename(spec))
+    return from_dict(read_yaml(spec, LaneError), os.path.basename(spec))

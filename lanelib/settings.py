@@ -20,6 +20,18 @@ def output_problem(path):
     return None
 
 
+def read_yaml(path, error, what='YAML'):
+    """The document in a YAML file (which also reads JSON); when it cannot be read, `error`
+    (an exception type) is raised with the file and the reason, never a traceback."""
+    import yaml  # Debian's python3-yaml, which rospy itself needs
+
+    try:
+        with open(path, encoding='utf-8') as f:
+            return yaml.safe_load(f)
+    except (OSError, yaml.YAMLError) as e:
+        raise error(f'{path}: cannot read as {what}: {e}') from None
+
+
 def setting(default, help, unit='', check=None, choices=None):
     """One row of a defaults table: value, unit, where it comes from, and its check."""
     return dataclasses.field(default=default,

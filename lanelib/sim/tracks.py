@@ -24,6 +24,7 @@ from dataclasses import dataclass, field, replace
 
 from lanelib.camera import CAMERAS
 from lanelib.geometry import Mounting
+from lanelib.settings import read_yaml
 from lanelib.sim.world import WORLDS, Scene, Track, World
 
 
@@ -218,14 +219,7 @@ def load_track(spec):
     if not os.path.exists(spec):
         raise TrackError(f"'{spec}' is neither a built-in track ({', '.join(BUILTIN)}) "
                          'nor an existing file')
-    import yaml  # YAML is a superset of JSON, so one parser reads both
-
-    try:
-        with open(spec, encoding='utf-8') as f:
-            doc = yaml.safe_load(f)
-    except (OSError, yaml.YAMLError) as e:
-        raise TrackError(f'{spec}: cannot read as YAML or JSON: {e}') from None
-    return from_dict(doc, os.path.basename(spec))
+    return from_dict(read_yaml(spec, TrackError, 'YAML or JSON'), os.path.basename(spec))
 
 
 def dumps(spec_name):
