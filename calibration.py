@@ -6,15 +6,36 @@ matrix and five distortion coefficients (lanelib/camera.py: LECTURE_CAMERA, digi
 Another camera needs its own: this tool makes it, in the YAML layout that ROS's
 `camera_calibration` writes, which kobuki_lane.py --calibration camera.yaml loads.
 
+The improved controller also needs the camera's mounting on the robot (height, pitch, roll,
+how far ahead of the robot's centre). --ground measures it from one picture of a chessboard
+lying on the floor in front of the robot, and writes the YAML that kobuki_lane.py --mounting
+reads (lanelib/mounting.py).
+
 usage:
     python calibration.py --show lecture          print a calibration and what it implies
     python calibration.py --show camera.yaml
     python calibration.py --images 'calib/*.png' --pattern 9x6 --square 0.025 -o camera.yaml
                                                   calibrate from chessboard pictures
+    python calibration.py --ground board.png --pattern 7x5 --square 0.05 --board-ahead 0.8 \
+        --calibration camera.yaml -o mounting.yaml
+                                                  measure the mounting from a board on the floor
 
 --pattern is the chessboard's inner corners (columns x rows), --square the side of one square
-in metres. The tool finds the corners (sub-pixel), calibrates (plumb_bob), prints the RMS
+in metres. --images finds the corners (sub-pixel), calibrates (plumb_bob), prints the RMS
 reprojection error and the pictures it could not use, and writes the camera_info YAML.
+
+--ground: lay the board flat on the floor, squarely in front of the robot, its middle on the
+robot's centre line and its COLUMNS inner corners running across the robot (left to right).
+--board-ahead D is how far the nearest row of inner corners (where four squares meet) lies
+ahead of the robot's centre, the point midway between the two wheels: measure along the floor
+from below the wheel axle. Take the picture with the camera as it is mounted, at the size the
+node will use, with the whole board and a white margin round it in view. The board must look
+big enough for its corners to be found: a level webcam sees the floor from about 0.6 m ahead,
+where 5 cm squares (a 7x5 board) work and 2.5 cm ones do not. --calibration gives the camera's
+intrinsics (lecture, duckiebot, or a camera_info YAML from --images; default lecture). The tool
+prints and writes height [m], pitch_deg (down from horizontal), roll_deg, forward [m, lens
+ahead of the robot's centre] and the reprojection error, and refuses a board it cannot find or
+a fit that makes no sense (the camera below the floor, an error over 2 px).
 """
 
 import argparse
@@ -26,6 +47,13 @@ import cv2
 import numpy as np
 
 from lanelib.camera import CalibrationError, Camera, camera_info_yaml, describe, load_calibration
+from lanelib.mounting import (
+    MountingError,
+    mounting_yaml,
+    parse_pattern,
+    solve_mounting,
+    warnings,
+)
 from lanelib.settings import output_problem
 
 
@@ -78,12 +106,9 @@ def calibrate(paths, pattern, square, name='camera'):
 
 def pattern_size(text):
     try:
-        cols, rows = (int(n) for n in text.lower().split('x'))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"'{text}' is not COLSxROWS, e.g. 9x6") from None
-    if cols < 2 or rows < 2:
-        raise argparse.ArgumentTypeError('a chessboard has at least 2x2 inner corners')
-    return cols, rows
+        return parse_pattern(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
 
 
 def positive_float(text):
@@ -113,6 +138,36 @@ def run_calibration(args):
     print(f'wrote {args.output}: use it with kobuki_lane.py --calibration {args.output}')
 
 
+def run_ground(args):
+    problem = output_problem(args.output)
+    if problem:
+        raise CalibrationError(f"cannot write '{args.output}': {problem}")
+    if args.board_ahead is None:
+        raise CalibrationError('--ground needs --board-ahead D: how far the nearest row of inner '
+                               "corners lies ahead of the robot's centre [m]")
+    camera = load_calibration(args.calibration)
+    if camera is None:
+        raise CalibrationError('--ground needs the intrinsics: --calibration lecture, duckiebot '
+                               'or a camera_info YAML, not none')
+    image = cv2.imread(args.ground, cv2.IMREAD_COLOR)
+    if image is None:
+        raise CalibrationError(f"'{args.ground}' is not a readable image")
+    try:
+        result = solve_mounting(image, camera, args.pattern, args.square, args.board_ahead)
+    except MountingError as e:
+        raise CalibrationError(f'{args.ground}: {e}') from None
+    for warning in warnings(result):
+        print(f'calibration.py: warning: {warning}', file=sys.stderr)
+    m = result.mounting
+    print(f'camera {m.height:.4f} m above the floor, {m.forward:.4f} m ahead of the robot '
+          f'centre, pitched {m.pitch_deg:.2f} deg down, rolled {m.roll_deg:.2f} deg; '
+          f'reprojection error {result.error_px:.3f} px ({len(result.corners)} corners)')
+    with open(args.output, 'w', encoding='utf-8') as f:
+        f.write(mounting_yaml(result))
+    print(f'wrote {args.output}: use it with kobuki_lane.py --controller improved --mounting '
+          f'{args.output}')
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -124,12 +179,27 @@ def main(argv=None):
                         help='inner corners, columns x rows (default: 9x6)')
     parser.add_argument('--square', type=positive_float, default=0.025,
                         help='side of one square [m] (default: 0.025)')
-    parser.add_argument('-o', '--output', default='camera.yaml',
-                        help='camera_info YAML to write (default: camera.yaml)')
+    parser.add_argument('--ground', metavar='IMAGE',
+                        help='measure the mounting from this picture of a chessboard on the floor '
+                             '(see above)')
+    parser.add_argument('--board-ahead', type=positive_float, metavar='D',
+                        help="with --ground: the nearest row of inner corners, this far ahead of "
+                             "the robot's centre [m]")
+    parser.add_argument('--calibration', default='lecture',
+                        help="with --ground: the camera's intrinsics, 'lecture' (default), "
+                             "'duckiebot' or a camera_info YAML")
+    parser.add_argument('-o', '--output',
+                        help='YAML to write (default: camera.yaml for --images, mounting.yaml '
+                             'for --ground)')
     parser.add_argument('--name', default='camera', help="camera_name in the YAML")
     args = parser.parse_args(argv)
+    if args.images and args.ground:
+        parser.error('give --images or --ground, not both')
+    args.output = args.output or ('mounting.yaml' if args.ground else 'camera.yaml')
     try:
-        if args.images:
+        if args.ground:
+            run_ground(args)
+        elif args.images:
             run_calibration(args)
         else:
             print(describe(load_calibration(args.show or 'lecture')))

@@ -44,9 +44,10 @@ import cv2
 import numpy as np
 
 from lanelib.camera import LECTURE_CAMERA, CalibrationError, load_calibration
-from lanelib.cli import check_output, fail
+from lanelib.cli import check_output, check_outputs_apart, fail
 from lanelib.fast import FastPipeline
 from lanelib.improved import ImprovedController, ImprovedParams
+from lanelib.mounting import read_mounting
 from lanelib.outputs import Outputs, Progress, VideoSink, decision_record, summary
 from lanelib.robot import MAX_ANGULAR, MAX_LINEAR, STOP, VELOCITY_TOPIC, Command
 from lanelib.ros import MasterWatch, RosUnavailable, connect_ros, debug_publisher, split_ros_args
@@ -345,6 +346,10 @@ def build_parser():
     io.add_argument('--calibration', default='lecture',
                     help="'lecture' (the lecture's camera matrix, default), 'duckiebot' "
                          "(Duckietown's default camera), 'none', or a ROS camera_info YAML path")
+    io.add_argument('--mounting', metavar='FILE',
+                    help="the improved controller's camera mounting (height, pitch_deg, "
+                         'roll_deg, forward), as calibration.py --ground writes it; '
+                         '--camera-height and the like, and private parameters, override it')
     io.add_argument('--dry-run', action='store_true',
                     help='no ROS: record the commands instead of publishing them; over files '
                          'this runs as fast as it can')
@@ -418,7 +423,7 @@ def check_arguments(args):
                if path]
     for path, what in outputs:
         check_output(PROG, path, what)
-    check_outputs_apart(args.source, outputs, args.stages, args.force)
+    check_outputs_apart(PROG, args.source, outputs, args.stages, args.force)
     if args.show:
         if not os.environ.get('DISPLAY') and not os.environ.get('WAYLAND_DISPLAY'):
             fail(PROG, '--show needs a display (DISPLAY is not set); use --video FILE instead')
@@ -427,42 +432,6 @@ def check_arguments(args):
         except cv2.error:
             fail(PROG, '--show needs an OpenCV build with GUI support (pip install '
                        'opencv-python instead of opencv-python-headless); use --video FILE')
-
-
-def check_outputs_apart(source, outputs, stages, force):
-    """Refuse an output that would destroy an input or another output: one that is the
-    source file, lies in the source folder (it would be read as a frame), is named twice, or
-    exists already (unless `force`); and a --stages folder that is the source folder."""
-    where = os.path.realpath(source) if os.path.exists(source) else None
-    seen = {}
-    for path, what in outputs:
-        real = os.path.realpath(path)
-        if where and real == where:
-            fail(PROG, f"{what} '{path}' is the --source itself: writing it would destroy it")
-        if where and os.path.isdir(where) and os.path.dirname(real) == where:
-            fail(PROG, f"{what} '{path}' is inside the --source folder, where it would be read "
-                       'as a frame; write it elsewhere')
-        if real in seen:
-            fail(PROG, f"{what} and {seen[real]} are the same file '{path}'")
-        seen[real] = what
-        if os.path.isdir(real):
-            fail(PROG, f"{what} '{path}' is a folder; give a file name")
-        if os.path.exists(real) and not force:
-            fail(PROG, f"{what} '{path}' exists already; remove it, choose another name, or "
-                       'add --force to replace it')
-        if what == '--video' and os.path.splitext(path)[1].lower() not in ('.avi', '.mp4'):
-            fail(PROG, f"--video '{path}': give a name ending in .avi or .mp4")
-        existed = os.path.exists(real)
-        try:  # opened for appending, so nothing in it is lost; made now, removed again
-            with open(real, 'a', encoding='utf-8'):
-                pass
-        except OSError as e:
-            fail(PROG, f"{what} '{path}': cannot write it ({e.strerror})")
-        if not existed:
-            os.remove(real)
-    if stages and where and os.path.realpath(stages) == where:
-        fail(PROG, f"--stages '{stages}' is the --source folder; its pictures would be read as "
-                   'frames')
 
 
 def connect(args, private):
@@ -484,12 +453,24 @@ def settings_from(args, get_param):
     params = resolve(LaneParams, args, get_param)
     safety = resolve(Safety, args, get_param)
     name = args.controller or str(get_param('~controller', 'lecture'))
-    improved = resolve(ImprovedParams, args, get_param) if name == 'improved' else None
+    improved = None
+    if name == 'improved':
+        improved = resolve(ImprovedParams, args, get_param, mounting_defaults(args, get_param))
     if 1.0 / params.rate >= safety.watchdog:  # its stops would come between the commands
         raise ValueError(f'rate {params.rate:g} Hz sends a command every {1 / params.rate:.2f} s, '
                          f'but the watchdog stops the robot after {safety.watchdog:g} s without '
                          'one: raise the rate or the watchdog')
     return params, safety, name, improved
+
+
+def mounting_defaults(args, get_param):
+    """The camera settings a --mounting file (or ~mounting) gives; {} without one."""
+    path = args.mounting or get_param('~mounting', '')
+    if not path:
+        return {}
+    m = read_mounting(str(path))  # a MountingError is a ValueError: refused with its message
+    return dict(camera_height=m.height, camera_pitch=m.pitch_deg, camera_forward=m.forward,
+                camera_roll=m.roll_deg)
 
 
 def open_outputs(args, params, ros, source, controller):

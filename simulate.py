@@ -35,6 +35,7 @@ did not (a departure, a stall, the time limit), 2 bad arguments or track file.
 """
 
 import argparse
+import functools
 import json
 import math
 import os
@@ -45,6 +46,7 @@ import cv2
 from kobuki_lane import LaneFollower, LaneParams, make_controller
 from lanelib.camera import CAMERAS
 from lanelib.cli import check_output, fail
+from lanelib.mounting import MountingError, parse_pattern, read_mounting
 from lanelib.outputs import Outputs
 from lanelib.rospy_standin import SimClock, StandInRospy, Twist
 from lanelib.safety import SafeBase
@@ -58,18 +60,18 @@ from lanelib.sim.simulator import (
     improved_params,
 )
 from lanelib.sim.tracks import BUILTIN, TrackError, load_track, with_world
-from lanelib.sim.world import WORLDS
+from lanelib.sim.world import WORLDS, chessboard_view
 
 PROG = 'simulate.py'
 
 
 # ---------------------------------------------------------------- runs
 
-def controller_for(name, spec, params):
+def controller_for(name, spec, params, mounting=None):
     """kobuki_lane's controller, told the track's camera; the improved one also its mounting
-    and lane."""
+    (or `mounting`, e.g. from a --mounting file) and lane."""
     return make_controller(name, params, CAMERAS[spec.camera],
-                           improved_params(spec) if name == 'improved' else None)
+                           improved_params(spec, mounting) if name == 'improved' else None)
 
 
 def run(spec, controller='lecture', seed=0, video=None, plot=None, time_limit=None,
@@ -209,6 +211,11 @@ def build_parser():
                        help='[m], above 0, at most 2')
     scene.add_argument('--camera-pitch', type=ranged(-45, 80),
                        help='down from horizontal [deg], -45 to 80')
+    scene.add_argument('--camera-roll', type=ranged(-45, 45),
+                       help='about the optical axis, + right side lower [deg], -45 to 45')
+    scene.add_argument('--mounting', metavar='FILE',
+                       help="the improved controller's idea of the mounting, a YAML from "
+                            'calibration.py --ground (default: the true one)')
     scene.add_argument('--start-offset', type=ranged(-1, 1), default=0.0,
                        help='[m], + left, -1 to 1')
     scene.add_argument('--start-yaw', type=ranged(-90, 90), default=0.0,
@@ -217,6 +224,17 @@ def build_parser():
                        help='base acceleration limit [m/s^2], 0 for none, at most 10')
     scene.add_argument('--latency', type=ranged(0, 2), default=0.05,
                        help='publish to wheels [s], 0 to 2 (default 0.05)')
+    board = parser.add_argument_group('a chessboard on the floor, for calibration.py --ground')
+    board.add_argument('--chessboard', metavar='FILE',
+                       help="write what the track's camera, mounted as it is, sees of a "
+                            'chessboard lying in front of the robot (PNG), instead of a run')
+    board.add_argument('--pattern', default='7x5',
+                       help='its inner corners, columns (across the robot) x rows (default 7x5)')
+    board.add_argument('--square', type=ranged(0.005, 0.5), default=0.05,
+                       help='side of a square [m], 0.005 to 0.5 (default 0.05)')
+    board.add_argument('--board-ahead', type=ranged(0.05, 5), default=0.8,
+                       help="nearest row of inner corners this far ahead of the robot's centre "
+                            '[m], 0.05 to 5 (default 0.8)')
     bench = parser.add_argument_group('benchmark')
     bench.add_argument('--benchmark', action='store_true',
                        help="run every built-in track x {lecture, improved} in the lecture's "
@@ -234,8 +252,10 @@ def build_parser():
 def check_outputs(args):
     """Refuse, before the run, an output that is a folder or has a name its writer cannot use
     (a --plot without an image extension failed in OpenCV after the whole run)."""
-    endings = {'--plot': ('.png', '.jpg', '.jpeg', '.bmp'), '--video': ('.avi', '.mp4')}
-    for path, what in ((args.json, '--json'), (args.plot, '--plot'), (args.video, '--video')):
+    pictures = ('.png', '.jpg', '.jpeg', '.bmp')
+    endings = {'--plot': pictures, '--chessboard': pictures, '--video': ('.avi', '.mp4')}
+    for path, what in ((args.json, '--json'), (args.plot, '--plot'), (args.video, '--video'),
+                       (args.chessboard, '--chessboard')):
         if path:
             check_output(PROG, path, what)
             if os.path.isdir(path):
@@ -264,7 +284,26 @@ def customise(spec, args):
         spec.mounting.height = args.camera_height
     if args.camera_pitch is not None:
         spec.mounting.pitch_deg = args.camera_pitch
+    if args.camera_roll is not None:
+        spec.mounting.roll_deg = args.camera_roll
     return spec
+
+
+def write_chessboard(spec, args):
+    """The --chessboard picture: the board on the floor through the track's camera."""
+    try:
+        pattern = parse_pattern(args.pattern)
+    except ValueError as e:
+        fail(PROG, f'--pattern: {e}')
+    image = chessboard_view(CAMERAS[spec.camera], spec.mounting, pattern, args.square,
+                            args.board_ahead, seed=args.seed)
+    if not cv2.imwrite(args.chessboard, image):
+        fail(PROG, f"--chessboard '{args.chessboard}': cannot write it")
+    m = spec.mounting
+    print(f'wrote {args.chessboard}: a {args.pattern} board of {args.square:g} m squares '
+          f'{args.board_ahead:g} m ahead, seen by the {spec.camera} camera {m.height:g} m up, '
+          f'pitched {m.pitch_deg:g} deg, rolled {m.roll_deg:g} deg, {m.forward:g} m ahead of '
+          'the robot centre')
 
 
 def main(argv=None):
@@ -291,9 +330,19 @@ def main(argv=None):
         spec = customise(load_track(args.track), args)
     except TrackError as e:
         fail(PROG, str(e))
+    if args.chessboard:
+        write_chessboard(spec, args)
+        return 0
+    factory = controller_for
+    if args.mounting:
+        try:
+            factory = functools.partial(controller_for, mounting=read_mounting(args.mounting))
+        except MountingError as e:
+            fail(PROG, f'--mounting: {e}')
     limits = BaseLimits(accel=args.accel, alpha=args.accel * 4, latency=args.latency)
     result = run(spec, args.controller, args.seed, args.video, args.plot, args.time_limit,
-                 args.keep_going, args.start_offset, math.radians(args.start_yaw), limits)
+                 args.keep_going, args.start_offset, math.radians(args.start_yaw), limits,
+                 factory)
     print(f"{result['track']} / {result['controller']}: "
           f"{'completed' if result['completed'] else 'ended: ' + result['ended']}, "
           f"progress {result['progress']:.0%}, {result['distance_m']:.2f} m in "

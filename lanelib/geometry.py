@@ -15,18 +15,23 @@ class Mounting:
     height: float = 0.20  # [m] lens above the floor
     pitch_deg: float = 0.0  # [deg] optical axis below horizontal
     forward: float = 0.10  # [m] lens ahead of the robot's centre
+    roll_deg: float = 0.0  # [deg] about the optical axis, + when the camera's right side is lower
 
 
-def camera_axes(pitch_deg):
+def camera_axes(pitch_deg, roll_deg=0.0):
     """The camera's x (right), y (down) and z (optical axis) in the robot frame."""
     p = math.radians(pitch_deg)
-    return (np.array([0.0, -1.0, 0.0]), np.array([-math.sin(p), 0.0, -math.cos(p)]),
-            np.array([math.cos(p), 0.0, -math.sin(p)]))
+    x_cam, y_cam = np.array([0.0, -1.0, 0.0]), np.array([-math.sin(p), 0.0, -math.cos(p)])
+    if roll_deg:  # turned about the optical axis: right towards down
+        r = math.radians(roll_deg)
+        x_cam, y_cam = (math.cos(r) * x_cam + math.sin(r) * y_cam,
+                        math.cos(r) * y_cam - math.sin(r) * x_cam)
+    return x_cam, y_cam, np.array([math.cos(p), 0.0, -math.sin(p)])
 
 
-def ray_directions(xn, yn, pitch_deg):
+def ray_directions(xn, yn, pitch_deg, roll_deg=0.0):
     """Normalised image coordinates to ray directions (..., 3) in the robot frame."""
-    x_cam, y_cam, z_cam = camera_axes(pitch_deg)
+    x_cam, y_cam, z_cam = camera_axes(pitch_deg, roll_deg)
     xn, yn = np.asarray(xn, float)[..., None], np.asarray(yn, float)[..., None]
     return xn * x_cam + yn * y_cam + z_cam
 
@@ -36,7 +41,7 @@ def rays_to_floor(xn, yn, mounting):
 
     Returns x, y and a mask of the rays that point down to the floor.
     """
-    d = ray_directions(xn, yn, mounting.pitch_deg)
+    d = ray_directions(xn, yn, mounting.pitch_deg, mounting.roll_deg)
     down = -d[..., 2]
     ok = down > 1e-9
     t = mounting.height / np.where(ok, down, 1.0)
@@ -52,7 +57,8 @@ def pixels_to_floor(uv, matrix, mounting):
 
 
 def floor_to_row(distance, matrix, mounting):
-    """The undistorted image row where floor `distance` metres ahead of the lens appears."""
+    """The undistorted image row where floor `distance` metres ahead of the lens appears
+    (in the image's middle column, with the camera rolled)."""
     angle = math.atan2(mounting.height, distance) - math.radians(mounting.pitch_deg)
     return matrix[1, 2] + matrix[1, 1] * math.tan(angle)
 
@@ -60,7 +66,7 @@ def floor_to_row(distance, matrix, mounting):
 def floor_to_pixels(x, y, matrix, mounting):
     """Floor points (robot frame) to pixels of the undistorted image: u, v and a mask of the
     points in front of the camera."""
-    x_cam, y_cam, z_cam = camera_axes(mounting.pitch_deg)
+    x_cam, y_cam, z_cam = camera_axes(mounting.pitch_deg, mounting.roll_deg)
     rel = np.stack([np.asarray(x, float) - mounting.forward, np.asarray(y, float),
                     np.full(np.shape(x), -mounting.height)], axis=-1)
     depth = rel @ z_cam

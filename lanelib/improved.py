@@ -53,7 +53,7 @@ from lanelib.lanefit import LaneFit, find_lane
 from lanelib.lanes import load_lane
 from lanelib.outputs import draw_curve, text_band, tint
 from lanelib.robot import STOP, Command, arc_step
-from lanelib.settings import finite, fraction, non_negative, positive, setting
+from lanelib.settings import between, finite, fraction, non_negative, positive, setting
 from lanelib.stages import Detection, as_bgr, slope_sum
 
 
@@ -72,6 +72,8 @@ class ImprovedParams:
                                   finite)
     camera_forward: float = setting(0.10, 'camera lens ahead of the robot centre', 'm',
                                     finite)
+    camera_roll: float = setting(0.0, "camera turned about its optical axis, + when its right "
+                                 'side is lower', 'deg', between(-45, 45))
     lane: str = setting('lecture', 'what the lane looks like: lecture (two tapes of any colour, '
                         '0.35 m), duckietown (yellow dashed left, white right), autorace (yellow '
                         'left, white right), or a lane profile YAML (lanelib/lanes.py)',
@@ -120,7 +122,8 @@ class ImprovedParams:
 
     @property
     def mounting(self):
-        return Mounting(self.camera_height, self.camera_pitch, self.camera_forward)
+        return Mounting(self.camera_height, self.camera_pitch, self.camera_forward,
+                        self.camera_roll)
 
 
 @dataclass

@@ -108,12 +108,14 @@ def add_arguments(group, table):
                                 f'{f"; {within}" if within else ""}')
 
 
-def resolve(table, args, get_param):
-    """Flag given > private ROS parameter (~name) > default; ValueError if out of range."""
-    values = {}
+def resolve(table, args, get_param, defaults=None):
+    """Flag given > private ROS parameter (~name) > `defaults` (a dict, e.g. from a file) > the
+    table's default; ValueError if out of range."""
+    values, defaults = {}, defaults or {}
     for f in dataclasses.fields(table):
         flag = getattr(args, f.name)
-        value = flag if flag is not None else get_param('~' + f.name, f.default)
+        value = flag if flag is not None else get_param('~' + f.name,
+                                                        defaults.get(f.name, f.default))
         kind = _kind(f)
         if kind is float and isinstance(value, (int, float)) and not isinstance(value, bool):
             value = float(value)

@@ -23,13 +23,14 @@ from lanelib.sim.world import ColourFloorMap, FloorCamera, FloorMap, Track
 STALL_TIME = 30.0  # [s] without 5 cm of progress ends a run
 
 
-def improved_params(spec):
-    """The improved controller's settings for a track: its camera mounting, its lane width and
-    the lane profile of its world."""
-    m = spec.mounting
+def improved_params(spec, mounting=None):
+    """The improved controller's settings for a track: its camera mounting (or `mounting`, what
+    the controller is told, e.g. measured by calibration.py --ground), its lane width and the
+    lane profile of its world."""
+    m = mounting or spec.mounting
     return ImprovedParams(camera_height=m.height, camera_pitch=m.pitch_deg,
-                          camera_forward=m.forward, lane_width=spec.track.lane_width,
-                          lane=spec.world.lane)
+                          camera_forward=m.forward, camera_roll=m.roll_deg,
+                          lane_width=spec.track.lane_width, lane=spec.world.lane)
 
 
 def floor_map(spec, track=None, seed=0):

@@ -6,6 +6,7 @@
       - straight: 1.5           # [m]
       - arc: {radius: 0.8, angle_deg: 90}    # positive turns left, negative right
     camera: {model: lecture, height: 0.20, pitch_deg: 0}   # optional: camera and mounting
+                                # (also forward [m] and roll_deg)
     world: duckietown           # optional: what the floor looks like (lecture, wood,
                                 # duckietown, autorace), or {base: NAME, lighting: 0.4, ...}
     scene:                                   # optional
@@ -133,7 +134,7 @@ def from_dict(doc, name='track'):
     track = Track(lane_width=lane, tape_width=tape, segments=_segments(doc['segments'], name))
     world = _world(doc.get('world', 'lecture'), f'{name}.world')
     cam = dict(_mapping(doc.get('camera', {}), f'{name}.camera',
-                        ('model', 'height', 'pitch_deg', 'forward')))
+                        ('model', 'height', 'pitch_deg', 'forward', 'roll_deg')))
     model = cam.pop('model', None)
     if model is not None and model not in CAMERAS:
         raise TrackError(f"{name}.camera.model must be one of {', '.join(CAMERAS)}, not "

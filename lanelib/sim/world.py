@@ -257,6 +257,46 @@ def _surface(world, height, width, res, origin, rng):
     return floor
 
 
+class ChessboardFloor:
+    """A chessboard lying flat on a plain floor in front of the robot, drawn from above like
+    FloorMap (255 white, 0 black, the floor 110), as lanelib/mounting.py says to lay it: its
+    `pattern` (columns x rows of inner corners) with the columns across the robot, centred on
+    its centre line, the nearest row of inner corners `board_ahead` metres ahead, a white
+    margin of one square round it."""
+
+    def __init__(self, pattern, square, board_ahead, res=0.001, size=3.5):
+        cols, rows = pattern
+        self.res = res
+        self.origin = np.array([-0.5, -size / 2])
+        n = int(round(size / res))
+        canvas = np.full((n, n), 110, np.uint8)
+        x0, y0 = board_ahead - 2 * square, -(cols + 3) / 2 * square  # the margin's corner
+        margin = np.array([[x0, y0], [x0 + (rows + 3) * square, y0],
+                           [x0 + (rows + 3) * square, -y0], [x0, -y0]])
+        cv2.fillPoly(canvas, [self._px(margin)], 255, cv2.LINE_AA, shift=4)
+        for i in range(rows + 1):
+            for j in range(cols + 1):
+                if (i + j) % 2:
+                    continue
+                x, y = board_ahead + (i - 1) * square, (j - (cols + 1) / 2) * square
+                corners = np.array([[x, y], [x + square, y], [x + square, y + square],
+                                    [x, y + square]])
+                cv2.fillPoly(canvas, [self._px(corners)], 0, cv2.LINE_AA, shift=4)
+        self.image = canvas
+
+    def _px(self, xy):
+        return np.round((xy - self.origin) / self.res * 16).astype(np.int32).reshape(-1, 1, 2)
+
+
+def chessboard_view(camera, mounting, pattern, square, board_ahead, noise=2.0, seed=0):
+    """What `camera` mounted so on a Kobuki sees of a ChessboardFloor: one BGR frame, for
+    calibration.py --ground."""
+    board = ChessboardFloor(pattern, square, board_ahead)
+    return FloorCamera(camera, mounting).render(board, (0.0, 0.0, 0.0),
+                                                Scene(floor=20.0, tape=235.0, noise=noise),
+                                                np.random.default_rng(seed))
+
+
 class FloorCamera:
     """Renders the onboard view of a track from a robot pose."""
 
@@ -274,7 +314,8 @@ class FloorCamera:
         crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-10)
         norm = cv2.undistortPointsIter(pix, camera.matrix, camera.distortion, None, None, crit)
         self._norm = norm.reshape(h * n, w * n, 2)
-        d = ray_directions(self._norm[..., 0], self._norm[..., 1], self.mounting.pitch_deg)
+        d = ray_directions(self._norm[..., 0], self._norm[..., 1], self.mounting.pitch_deg,
+                           self.mounting.roll_deg)
         self._azimuth = np.arctan2(d[..., 1], d[..., 0])  # ray direction, robot frame [rad]
         self._hits = {}
 

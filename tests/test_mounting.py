@@ -1,0 +1,174 @@
+"""calibration.py --ground and --mounting: the camera's mounting measured from a chessboard on
+the floor, rendered by the simulator at a known mounting."""
+
+import os
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+from helpers import NODE, REPO, SAMPLES, read_jsonl
+
+import simulate
+from calibration import main as calibration_main
+from kobuki_lane import main as node_main
+from lanelib.camera import DUCKIEBOT_CAMERA, LECTURE_CAMERA
+from lanelib.geometry import Mounting, floor_to_pixels, pixels_to_floor
+from lanelib.mounting import MountingError, read_mounting, solve_mounting
+from lanelib.sim.world import chessboard_view
+
+# (camera, true mounting, board pattern, square [m], nearest corners ahead [m])
+CASES = {
+    'level webcam': (LECTURE_CAMERA, Mounting(0.20, 0.0, 0.10), (7, 5), 0.05, 0.8),
+    'webcam pitched and rolled': (LECTURE_CAMERA, Mounting(0.26, 4.0, 0.07, 1.5), (7, 5), 0.05,
+                                  0.75),
+    'pitched wide camera': (DUCKIEBOT_CAMERA, Mounting(0.10, 20.0, 0.05), (9, 6), 0.025, 0.2),
+    'wide camera, steeper': (DUCKIEBOT_CAMERA, Mounting(0.12, 27.0, 0.03, -2.0), (9, 6), 0.025,
+                             0.2),
+}
+
+
+@pytest.mark.parametrize('case', CASES)
+def test_the_board_gives_back_a_known_mounting(case):
+    camera, true, pattern, square, ahead = CASES[case]
+    image = chessboard_view(camera, true, pattern, square, ahead, noise=3.0, seed=1)
+    result = solve_mounting(image, camera, pattern, square, ahead)
+    m = result.mounting
+    assert m.height == pytest.approx(true.height, abs=0.005)
+    assert m.pitch_deg == pytest.approx(true.pitch_deg, abs=0.5)
+    assert m.roll_deg == pytest.approx(true.roll_deg, abs=0.5)
+    assert m.forward == pytest.approx(true.forward, abs=0.01)
+    assert abs(result.yaw_deg) < 0.5 and abs(result.lateral) < 0.005
+    assert result.error_px < 0.5
+
+
+def test_roll_turns_the_picture_about_the_optical_axis():
+    """A camera rolled with its right side lower sees the floor's horizon rise to the right,
+    and floor points go to pixels and back unchanged."""
+    m = Mounting(0.2, 10.0, 0.1, 5.0)
+    matrix = LECTURE_CAMERA.matrix
+    u, v, ok = floor_to_pixels(np.array([1.0, 1.0]), np.array([0.3, -0.3]), matrix, m)
+    assert ok.all() and v[0] > v[1]  # the left point lower in the picture: horizon rises right
+    x, y, hit = pixels_to_floor(np.stack([u, v], axis=1), matrix, m)
+    assert hit.all() and np.allclose(x, 1.0) and np.allclose(y, [0.3, -0.3])
+    level = Mounting(0.2, 10.0, 0.1)
+    assert np.allclose(floor_to_pixels(1.0, 0.3, matrix, level)[:2],
+                       floor_to_pixels(1.0, 0.3, matrix, Mounting(0.2, 10.0, 0.1, 0.0))[:2])
+
+
+@pytest.fixture(scope='module')
+def wide_board(tmp_path_factory):
+    """What simulate.py --chessboard draws for the duckietown world's camera, and the YAML
+    calibration.py --ground makes of it."""
+    folder = tmp_path_factory.mktemp('ground')
+    picture, yaml = folder / 'board.png', folder / 'mounting.yaml'
+    assert simulate.main(['--world', 'duckietown', '--chessboard', str(picture), '--pattern',
+                          '9x6', '--square', '0.025', '--board-ahead', '0.2']) == 0
+    assert calibration_main(['--ground', str(picture), '--pattern', '9x6', '--square', '0.025',
+                             '--board-ahead', '0.2', '--calibration', 'duckiebot', '-o',
+                             str(yaml)]) == 0
+    return picture, yaml
+
+
+def test_the_tool_writes_the_mounting_the_node_reads(wide_board):
+    _, yaml = wide_board
+    m = read_mounting(str(yaml))
+    assert m.height == pytest.approx(0.10, abs=0.005)
+    assert m.pitch_deg == pytest.approx(20.0, abs=0.5)
+    assert m.forward == pytest.approx(0.05, abs=0.01)
+    assert 'reprojection_error_px' in yaml.read_text()
+
+
+def test_the_simulator_drives_with_the_measured_mounting(wide_board, tmp_path):
+    _, yaml = wide_board
+    out = tmp_path / 'run.json'
+    status = simulate.main(['--track', 's_bend', '--world', 'duckietown', '--controller',
+                            'improved', '--mounting', str(yaml), '--json', str(out)])
+    import json
+
+    result = json.loads(out.read_text())
+    assert status == 0 and result['completed'] and result['departures'] == 0
+    assert result['rms_offset_m'] <= 0.03
+
+
+def test_the_node_takes_the_mounting_file_and_flags_override_it(wide_board, tmp_path):
+    _, yaml = wide_board
+    out = tmp_path / 'd.jsonl'
+    argv = ['--source', SAMPLES, '--dry-run', '--controller', 'improved', '--quiet']
+    assert node_main([*argv, '--mounting', str(yaml), '--decisions', str(out)]) == 0
+    assert len(read_jsonl(out)) == len(os.listdir(SAMPLES))
+    from kobuki_lane import build_parser, settings_from
+
+    def improved(*extra):
+        args = build_parser().parse_args([*argv, '--mounting', str(yaml), *extra])
+        params = dict(extra_params)
+        return settings_from(args, lambda name, default: params.get(name, default))[3]
+
+    extra_params = {}
+    p = improved()
+    assert p.camera_height == pytest.approx(0.10, abs=0.005)
+    assert p.camera_pitch == pytest.approx(20.0, abs=0.5)
+    assert improved('--camera-pitch', '12').camera_pitch == 12.0  # a flag outranks the file
+    extra_params['~camera_height'] = 0.3  # and so does a private parameter
+    assert improved().camera_height == 0.3
+
+
+def cli(*args):
+    return subprocess.run([sys.executable, *args], cwd=REPO, capture_output=True, text=True,
+                          timeout=120)
+
+
+def test_the_tool_refuses_what_it_cannot_use(wide_board, tmp_path):
+    picture, _ = wide_board
+    out = tmp_path / 'm.yaml'
+    blank = tmp_path / 'blank.png'
+    cv2.imwrite(str(blank), np.full((480, 640, 3), 120, np.uint8))
+    common = ['--square', '0.025', '--board-ahead', '0.2', '--calibration', 'duckiebot', '-o',
+              str(out)]
+    cases = [
+        (['--ground', str(blank), '--pattern', '9x6'], 'no 9x6 chessboard found'),
+        (['--ground', str(picture), '--pattern', '6x9'], 'the board lies the wrong way round'),
+        (['--ground', str(picture), '--pattern', '9x6', '--calibration', 'lecture'],
+         'fits the picture badly'),
+        (['--ground', str(picture), '--pattern', '9x6', '--calibration', 'none'],
+         'needs the intrinsics'),
+        (['--ground', str(tmp_path / 'missing.png'), '--pattern', '9x6'],
+         'is not a readable image'),
+    ]
+    for argv, message in cases:
+        proc = cli('calibration.py', *common, *argv)
+        assert proc.returncode == 2, (argv, proc.stderr)
+        assert message in proc.stderr and 'Traceback' not in proc.stderr, (argv, proc.stderr)
+        assert not out.exists()
+    proc = cli('calibration.py', '--ground', str(picture), '--pattern', '9x6', '--square',
+               '0.025', '-o', str(out))
+    assert proc.returncode == 2 and '--board-ahead' in proc.stderr
+
+
+def test_a_fit_no_kobuki_camera_could_have_is_refused():
+    """A picture upside down, or a board said to be four times as big and nearer than it is:
+    the poses that fit are not on a Kobuki (rolled 180 degrees; 2.75 m behind it)."""
+    camera, true, pattern, square, ahead = CASES['level webcam']
+    image = chessboard_view(camera, true, pattern, square, ahead)
+    with pytest.raises(MountingError, match='no camera on a Kobuki has'):
+        solve_mounting(cv2.rotate(image, cv2.ROTATE_180), camera, pattern, square, ahead)
+    with pytest.raises(MountingError, match='behind the robot.s centre'):
+        solve_mounting(image, camera, pattern, square * 4, 0.05)
+
+
+@pytest.mark.parametrize('text, field', [
+    ('height: 0.2\npitch_deg: 3\nroll_deg: 0\n', 'forward'),
+    ('height: 0.2\npitch_deg: 3\nroll_deg: 0\nforward: 0.1\nyaw: 2\n', 'yaw'),
+    ('height: -0.2\npitch_deg: 3\nroll_deg: 0\nforward: 0.1\n', 'height'),
+    ('height: 0.2\npitch_deg: high\nroll_deg: 0\nforward: 0.1\n', 'pitch_deg'),
+    ('height: 0.2\npitch_deg: [\n', 'cannot read'),
+])
+def test_a_bad_mounting_file_names_the_field(tmp_path, text, field):
+    path = tmp_path / 'mounting.yaml'
+    path.write_text(text)
+    with pytest.raises(MountingError, match=field):
+        read_mounting(str(path))
+    proc = cli(NODE, '--source', SAMPLES, '--dry-run', '--controller', 'improved', '--mounting',
+               str(path))
+    assert proc.returncode == 2 and field in proc.stderr and 'Traceback' not in proc.stderr
