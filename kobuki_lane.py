@@ -49,7 +49,7 @@ from lanelib.fast import FastPipeline
 from lanelib.improved import ImprovedController, ImprovedParams
 from lanelib.mounting import read_mounting
 from lanelib.outputs import Outputs, Progress, VideoSink, decision_record, summary
-from lanelib.robot import MAX_ANGULAR, MAX_LINEAR, STOP, VELOCITY_TOPIC, Command
+from lanelib.robot import MAX_ANGULAR, MAX_LINEAR, STOP, VELOCITY_TOPIC, Command, within_limits
 from lanelib.ros import MasterWatch, RosUnavailable, connect_ros, debug_publisher, split_ros_args
 from lanelib.rospy_standin import SimClock, StandInRospy, WallClock
 from lanelib.rospy_standin import Twist as StandInTwist
@@ -184,7 +184,10 @@ class LectureRule:
     def extra(self):
         return {}
 
-    def __call__(self, detection):
+    def sent(self, command):
+        """What went to the wheels (the rule keeps no state)."""
+
+    def __call__(self, detection, t=None):  # (t: the frame's time; the rule needs none)
         p, theta = self.p, detection.slopes.theta
         # fixed: with no segments the lecture published nothing; stop instead
         if len(detection.lines) == 0:
@@ -216,7 +219,8 @@ class LaneFollower:
     thrust, keep the rate; every way out stops the robot.
 
     ros: the rospy module or a rospy_standin.StandInRospy; source: a frame source
-    (lanelib/sources.py); controller: LectureRule or ImprovedController; base: the
+    (lanelib/sources.py); controller: LectureRule or ImprovedController, called with each
+    Detection and its frame's time, and told (sent) the command that went out; base: the
     safety.SafeBase every command goes through; outputs: outputs.Outputs; rate [Hz]."""
 
     def __init__(self, ros, source, controller, base, outputs=None, rate=4.0):
@@ -243,12 +247,13 @@ class LaneFollower:
         ros = self.ros
         read_at = ros.get_time() if read_at is None else read_at
         detection = self.controller.perceive(frame, keep_stages=bool(self.outputs.stages))
-        command = self.controller(detection)
+        command = self.controller(detection, read_at)
         late = ros.get_time() - read_at > self.base.safety.watchdog
         held = self.base.held
         if late or held:
             command = STOP
         self.base.publish(command)
+        self.controller.sent(within_limits(command))  # what it steers on, not what it asked
         record = decision_record(self.frames, label, detection, command, ros.get_time(),
                                  self.controller.extra())
         if late:
@@ -271,6 +276,7 @@ class LaneFollower:
         self.errors += 1
         self.failed += 1
         self.base.publish(STOP)
+        self.controller.sent(STOP)
         self.ros.logerr('frame %d (%s): %s: %s; robot stopped (%d in a row)', self.frames, label,
                         type(error).__name__, error, self.errors)
         self.outputs.write(dict(frame=self.frames, source=label, decision='none',
@@ -303,6 +309,7 @@ class LaneFollower:
                         self.ended = 'end of input'
                         break
                     lost_since = ros.get_time() if lost_since is None else lost_since
+                    self.controller.sent(STOP)
                     if not camera_back(ros, self.source, self.base, lost_since,
                                        safety.camera_retry, self._stopping):
                         self.ended = 'camera lost'
@@ -524,7 +531,9 @@ def main(argv=None, make_controller=make_controller):
     lane = getattr(controller, 'profile', None)
     ros.loginfo('kobuki_lane: source %s, %s controller%s, algorithm %s, calibration %s, %.1f Hz '
                 'on %s%s', source.name, controller.name,
-                f' (lane {lane.name}, {controller.p.lane_width:g} m)' if lane else '',
+                f' (lane {lane.name}, {controller.p.lane_width:g} m; camera '
+                f'{controller.p.camera_height:g} m up, pitched {controller.p.camera_pitch:g} deg)'
+                if lane else '',
                 params.algorithm, args.calibration,
                 params.rate, VELOCITY_TOPIC, ' (dry run)' if args.dry_run else '')
     watch = None if args.dry_run else MasterWatch(base, ros).start()

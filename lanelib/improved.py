@@ -363,6 +363,7 @@ class ImprovedController:
     def reset(self):
         """Forget the lane: the next frame is read as if it were the first."""
         self.estimate, self.lost_for, self.last = None, math.inf, (0.0, 0.0)
+        self.t = None  # when the last frame was read
         self.memory = LaneMemory(self.p.memory) if self.p.memory > 0 else None
 
     def layout(self, width, height, roi):
@@ -425,14 +426,26 @@ class ImprovedController:
         detection.pieces, detection.masks = pieces[:p.max_pieces], (masks, first)
         self.mark('pieces')
 
-    def __call__(self, detection):
+    def elapsed(self, t):
+        """Seconds since the last frame: from the frames' times `t` when the loop gives them
+        (on a loaded robot frames come later than the rate says, and the memory must move as
+        far as the robot did), else one loop period."""
+        last, self.t = self.t, t
+        if t is None or last is None:
+            return self.dt
+        dt = max(0.0, t - last)
+        return self.dt if abs(dt - self.dt) < 1e-6 else dt  # a clock's rounding is no motion
+
+    def __call__(self, detection, t=None):
+        """The command for one frame's detection; t: when the frame was read [s] (ROS time)."""
         p = self.p
+        dt = self.elapsed(t)
         self.cluttered = detection.cluttered
-        prior = predict(self.estimate, *self.last, self.dt) if self.estimate else None
+        prior = predict(self.estimate, *self.last, dt) if self.estimate else None
         guide = prior  # the centre line the segments are sorted to left and right against
         anchor = None  # where the lane is at the robot: the prior's, or the memory's
         if self.memory is not None:
-            self.memory.move(*self.last, self.dt)
+            self.memory.move(*self.last, dt)
             remembered = self.memory.centre_line(0.2, 1.2, 0.3)
             if remembered is not None and prior is not None:
                 guide = replace(prior, a=remembered[0], b=remembered[1], c=remembered[2])
@@ -446,7 +459,7 @@ class ImprovedController:
             self.lost_for = 0.0
             self.estimate = blend(prior, meas, p.smoothing * meas.confidence) if prior else meas
         else:
-            self.lost_for += self.dt
+            self.lost_for += dt
             self.estimate = prior
         if self.memory is not None and meas is not None:
             self.memory.add(*meas.points)
@@ -461,6 +474,12 @@ class ImprovedController:
         self.last = (v, omega)
         self.mark('steer')
         return Command(self.decision(), v, omega)
+
+    def sent(self, command):
+        """The command that went to the wheels: a stop when the loop held the robot (the ROS
+        master lost, a late frame, a lost camera) or a frame failed. The lane memory and the
+        prediction move with it, not with what this controller asked for."""
+        self.last = (command.linear_x, command.angular_z)
 
     def decision(self):
         """'left' or 'right' when the lane's centre lies more than turn_offset lane widths to

@@ -8,7 +8,7 @@ import pytest
 
 from kobuki_lane import LaneFollower, LaneParams, LectureRule
 from lanelib.outputs import Outputs
-from lanelib.robot import Command, within_limits
+from lanelib.robot import STOP, Command, within_limits
 from lanelib.rospy_standin import SimClock, StandInRospy, Twist
 from lanelib.safety import SafeBase
 from lanelib.sources import ListSource
@@ -37,7 +37,7 @@ class Scripted(LectureRule):
         super().__init__(LaneParams(), camera=None)
         self.decide = decide
 
-    def __call__(self, detection):
+    def __call__(self, detection, t=None):
         return self.decide(detection)
 
 
@@ -123,6 +123,32 @@ def test_the_watchdog_keeps_commands_coming_while_the_camera_stalls():
     assert len(during) >= 6 and all(c == (0.0, 0.0) for c in during)  # stopped, not turning
     assert follower.base.watchdog_stops == len(during)
     assert any('no command for' in text for _, text in ros.log_lines)
+
+
+def test_the_controller_is_told_what_went_to_the_wheels():
+    """A held robot, a late frame, a failed frame: the controller asked for motion, a stop was
+    sent, and it is told so (the improved controller dead-reckons on it)."""
+    told = []
+
+    class Listening(Scripted):
+        def sent(self, command):
+            told.append(command)
+
+    def decide(detection):
+        if len(told) == 3:
+            raise RuntimeError('a bad frame')
+        return Command('left', 0.05, 9.0)
+
+    ros, follower = make(ListSource(blank_frames(5)), Listening(decide))
+    follower.base.hold('ROS master lost')
+    follower.step(blank_frames(1)[0], 'held')
+    follower.base.resume()
+    follower.step(blank_frames(1)[0], 'late', read_at=ros.get_time() - 1.0)
+    follower.step(blank_frames(1)[0], 'clipped to the Kobuki')
+    follower.run()  # its first frame raises
+    assert told[:2] == [STOP, STOP]
+    assert told[2] == within_limits(Command('left', 0.05, 9.0)) and told[2].angular_z < 9.0
+    assert told[3] == STOP
 
 
 def test_a_frame_that_takes_too_long_is_acted_on_with_a_stop():

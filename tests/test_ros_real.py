@@ -281,18 +281,23 @@ def test_ros_soak_holds_the_robot_through_master_crashes(tmp_path):
 
 
 def test_roslaunch_passes_the_lane_profile(roscore, few_frames, tmp_path):
-    """lane:= reaches the improved controller as ~lane: a built-in profile is used and named in
-    the log, and one that does not exist stops the node with its error."""
+    """lane:= reaches the improved controller as ~lane, and mounting:= as ~mounting: a built-in
+    profile and the mounting file are used and named in the log, and a profile that does not
+    exist stops the node with its error."""
+    mounting = tmp_path / 'mounting.yaml'
+    mounting.write_text('height: 0.1\npitch_deg: 21.5\nroll_deg: 0\nforward: 0.05\n')
+
     def launch(lane):
         cmd = ['roslaunch', 'kobuki_lane', 'kobuki_lane.launch', f'source:={few_frames}',
-               'controller:=improved', f'lane:={lane}',
+               'controller:=improved', f'lane:={lane}', f'mounting:={mounting}',
                f"extra_args:=--decisions {tmp_path / (lane + '.jsonl')} --wait-for-base 0"]
         return subprocess.run(cmd, env=roscore['env'], cwd=tmp_path, capture_output=True,
                               text=True, timeout=90)
 
     proc = launch('duckietown')
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
-    assert 'improved controller (lane duckietown, 0.2375 m)' in proc.stdout + proc.stderr
+    assert ('improved controller (lane duckietown, 0.2375 m; camera 0.1 m up, pitched 21.5 deg)'
+            in proc.stdout + proc.stderr)
     assert len(read_jsonl(tmp_path / 'duckietown.jsonl')) == 8
     proc = launch('no_such_lane')
     out = proc.stdout + proc.stderr

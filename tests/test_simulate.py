@@ -16,6 +16,7 @@ from kobuki_lane import main as node_main
 from lanelib.camera import LECTURE_CAMERA
 from lanelib.geometry import Mounting, camera_axes
 from lanelib.improved import ImprovedParams, LaneEstimate, LaneMemory, measure_lane
+from lanelib.robot import STOP, arc_step
 from lanelib.sim.base import BaseLimits, DiffDriveBase
 from lanelib.sim.simulator import improved_params
 from lanelib.sim.tracks import TrackError, from_dict, load_track
@@ -157,6 +158,32 @@ def test_lane_memory_keeps_points_where_they_are_on_the_floor():
     assert np.allclose(y, -s * dx + c * dy, atol=1e-9)
     memory.move(0.0, 0.0, 10.0)  # older than `seconds`: forgotten
     assert memory.local()[0].size == 0
+
+
+def straight_lane_frame():
+    track = Track(segments=[{'straight': 8.0}], start=(-1.0, 0.0, 0.0))
+    return FloorCamera(LECTURE_CAMERA).render(FloorMap(track), track.pose_at(1.0), Scene())
+
+
+def test_the_memory_moves_with_what_was_sent_for_as_long_as_it_took():
+    """On a loaded robot frames come later than the rate says, and a held robot does not move
+    whatever the controller asked: the lane memory follows the frames' times and the commands
+    that went out (the real-time soak lost the lane at bends without this)."""
+    frame = straight_lane_frame()
+    ctl = make_controller('improved', LaneParams())
+    command = ctl(ctl.perceive(frame), 10.0)
+    assert command.linear_x > 0
+    ctl(ctl.perceive(frame), 10.6)  # 0.6 s later, not the loop's 0.25
+    moved = arc_step(0.0, 0.0, 0.0, command.linear_x, command.angular_z, 0.6)
+    assert np.allclose(ctl.memory.pose, moved, atol=1e-12)
+    ctl.sent(STOP)  # the loop held the robot: it stood still
+    ctl(ctl.perceive(frame), 10.85)
+    assert np.allclose(ctl.memory.pose, moved, atol=1e-12)
+    untimed = make_controller('improved', LaneParams())
+    first = untimed(untimed.perceive(frame))
+    untimed(untimed.perceive(frame))  # no times: one loop period, 0.25 s
+    assert np.allclose(untimed.memory.pose,
+                       arc_step(0.0, 0.0, 0.0, first.linear_x, first.angular_z, 0.25), atol=1e-12)
 
 
 def test_lane_memory_holds_the_line_into_a_tight_bend():

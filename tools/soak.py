@@ -173,11 +173,14 @@ class FaultyController:
             raise RuntimeError('injected pipeline error')
         return self.inner.perceive(frame, keep_stages)
 
-    def __call__(self, detection):
-        return self.inner(detection)
+    def __call__(self, detection, t=None):
+        return self.inner(detection, t)
 
     def extra(self):
         return self.inner.extra()
+
+    def sent(self, command):
+        self.inner.sent(command)
 
 
 def moving(commands, intervals, grace=0.0):
