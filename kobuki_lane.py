@@ -227,7 +227,7 @@ class LaneFollower:
         self.ros, self.source, self.controller, self.base = ros, source, controller, base
         self.outputs = outputs or Outputs(LaneParams())
         self.rate = rate
-        self.counts = dict(left=0, right=0, straight=0, none=0)
+        self.counts = dict(left=0, right=0, straight=0, none=0, search=0)
         self.frames = 0
         self.errors = 0  # pipeline failures in a row
         self.failed = 0  # frames the pipeline failed on, in all

@@ -76,9 +76,10 @@ class Piece:
     points that stand for it when the lane is fitted (x, y, weight): the means of its points
     in POINTS equal runs along its axis, each weighted by its share of the length."""
 
-    def __init__(self, x, y, phi, colour, length, width):
+    def __init__(self, x, y, phi, colour, length, width, region=None):
         self.x, self.y, self.phi, self.colour = x, y, phi, colour
         self.length, self.width = length, width
+        self.region = region  # the connected region of the mask it was cut from: one tape
         self.w = np.full(len(x), length / len(x))
         runs = np.array_split(np.argsort(x * math.cos(phi) + y * math.sin(phi)), POINTS)
         self.summary = (np.array([x[i].mean() for i in runs]),
@@ -128,7 +129,7 @@ def tape_pieces(mask, colour, matrix, mounting, tape_width, min_length, step, ro
             band = np.flatnonzero(which == b)
             for part in _halves(x[band], y[band], 1.5 * step):
                 piece = _piece(x[band[part]], y[band[part]], cut[band[part]], colour,
-                               tape_width, min_length, max_points)
+                               tape_width, min_length, max_points, (colour, i))
                 if piece is not None:
                     pieces.append(piece)
     return pieces
@@ -179,7 +180,7 @@ def view_sides(view):
     return (view > 0) & (inner == 0)
 
 
-def _piece(x, y, cut, colour, tape_width, min_length, max_points):
+def _piece(x, y, cut, colour, tape_width, min_length, max_points, region=None):
     if cut.any():
         # where the view cuts the tape, the tape's cross-sections are partial and their middle
         # is off its centre: leave out the points level (along the tape) with the cut
@@ -198,4 +199,4 @@ def _piece(x, y, cut, colour, tape_width, min_length, max_points):
             not 0.4 * tape_width <= width <= 3.0 * tape_width):
         return None
     d = axes[:, 1] if axes[0, 1] >= 0 else -axes[:, 1]  # pointing ahead
-    return Piece(x, y, math.atan2(d[1], d[0]), colour, length, width)
+    return Piece(x, y, math.atan2(d[1], d[0]), colour, length, width, region)

@@ -49,7 +49,7 @@ from lanelib.camera import LECTURE_CAMERA, undistortion_maps
 from lanelib.colour import colour_masks, tape_pieces, view_sides
 from lanelib.fast import Layout
 from lanelib.geometry import Mounting, floor_to_pixels, floor_to_row
-from lanelib.lanefit import LaneFit, find_lane
+from lanelib.lanefit import LaneFit, find_lane, fit_lanes, signed_distance
 from lanelib.lanes import load_lane
 from lanelib.outputs import draw_curve, text_band, tint
 from lanelib.robot import STOP, Command, arc_step
@@ -114,6 +114,12 @@ class ImprovedParams:
                                       'this far ahead', 'm', positive)
     memory_window: float = setting(0.25, 'with memory: fit the points this far either side of '
                                    'the look-ahead', 'm', positive)
+    search_angle: float = setting(90.0, 'lane lost and nothing remembered ahead: turn in place '
+                                  'towards where it was last seen going, up to this angle, then '
+                                  'stop; 0: no search, stop at once', 'deg', between(0, 360))
+    search_rate: float = setting(0.5, 'turn rate while searching', 'rad/s', positive)
+    search_time: float = setting(6.0, 'the search gives up after this long whatever the angle',
+                                 's', positive)
     turn_offset: float = setting(0.5, "the decision recorded: 'left' or 'right' when the lane's "
                                  'centre lies more than this many lane widths to that side at '
                                  'the look-ahead distance (going straight, the robot would be '
@@ -149,6 +155,10 @@ class LaneEstimate:
     @property
     def curvature(self):  # the lane bends left [1/m]
         return 2 * self.c / (1 + self.b ** 2) ** 1.5
+
+    @property
+    def arc(self):  # (e, psi, k) of the arc it starts as, lanefit's shape
+        return self.a, math.atan(self.b), self.curvature
 
     def lateral_at(self, distance):
         """How far to the left [m] the centre line lies `distance` metres from the robot,
@@ -194,7 +204,7 @@ def measure_lane(pieces, profile, p, prior=None, anchor=None):
     robot would be more than half a lane outside the lane found; and the lanefit.LaneFit it
     rests on (or None). prior: the LaneEstimate expected; anchor: (offset, heading) of the
     lane expected at the robot, if known better than the prior's (lanefit.find_lane)."""
-    guide = None if prior is None else (prior.a, math.atan(prior.b), prior.curvature)
+    guide = prior if prior is None or isinstance(prior, tuple) else prior.arc
     fit = find_lane(pieces, profile, p.lane_width, guide, width_tolerance=p.width_tolerance,
                     anchor=anchor)
     if fit is None or fit.left + fit.right < 0.25 * p.lane_width or abs(fit.e) > fit.width:
@@ -313,6 +323,48 @@ class LaneMemory:
         return coef
 
 
+def remembered_arc(memory, start, reach=1.0, outlier=0.06):
+    """The remembered centre line within `reach` metres of the robot as an arc (e, psi, k)
+    through the robot (lanefit's shape: it can turn any angle, which a polynomial in x, as in
+    LaneMemory.centre_line, cannot), refined from `start` (e, psi, k), dropping points
+    `outlier` metres off it; None with fewer than 6 points."""
+    x, y, w = memory.local()
+    keep = np.hypot(x, y) < reach
+    if np.count_nonzero(keep) < 6:
+        return None
+    x, y, w = x[keep], y[keep], w[keep]
+    arc = np.array([[*start, 0.0]], float)
+    hold = ([1e-6 * w.sum()] * 3 + [0.0], [0.0] * 4)
+    for _ in range(3):
+        arc = fit_lanes(x, y, np.zeros((1, len(x))), w[None, :], arc, hold, (0.0, 0.0),
+                        iterations=6)
+        near = np.abs(signed_distance(x, y, *arc[0, :3])) < outlier
+        if np.count_nonzero(near) < 6:
+            return None
+        x, y, w = x[near], y[near], w[near]
+    return tuple(float(v) for v in arc[0, :3]), (x, y)
+
+
+def pursue_memory(memory, est, p):
+    """(linear.x, angular.z) along the remembered centre line while no lane is in view: pure
+    pursuit of the point memory_lookahead away on the arc fitted to it (exact on an arc), or
+    None when the memory does not reach that point (nothing remembered near it)."""
+    found = remembered_arc(memory, est.arc)
+    if found is None:
+        return None
+    arc, (x, y) = found
+    if abs(arc[0]) > p.lane_width / 4:
+        return None  # the robot is not where the memory says the lane is: do not trust it
+    L = p.memory_lookahead
+    ax, ay, _ = LaneFit(arc, None, 0, 0, None).point_at(L)
+    if np.min(np.hypot(x - ax, y - ay)) > 0.1 or ax <= 0:
+        return None
+    k = 2 * ay / L ** 2
+    v = p.v_max / (1 + p.curve_slowdown * abs(k)) * (0.5 + 0.5 * est.confidence)
+    v = float(np.clip(v, p.v_min, p.v_max))
+    return v, float(np.clip(v * k, -p.omega_max, p.omega_max)), arc
+
+
 def steer_memory(memory, est, p):
     """(linear.x, angular.z, y) from the remembered centre line around p.memory_lookahead, or
     None when too little of it is remembered there."""
@@ -364,6 +416,7 @@ class ImprovedController:
         """Forget the lane: the next frame is read as if it were the first."""
         self.estimate, self.lost_for, self.last = None, math.inf, (0.0, 0.0)
         self.t = None  # when the last frame was read
+        self.search = None  # while searching: [direction, angle turned [rad], time [s]]
         self.memory = LaneMemory(self.p.memory) if self.p.memory > 0 else None
 
     def layout(self, width, height, roi):
@@ -452,34 +505,78 @@ class ImprovedController:
             under = self.memory.centre_line(-0.2, 0.4, 0.2)  # about the robot: no lever
             if under is not None:
                 anchor = (under[0], math.atan(under[1]))
+            if prior is not None and self.lost_for > p.lost_timeout:
+                found = remembered_arc(self.memory, prior.arc)  # any bend, even a U-turn
+                if found is not None:
+                    guide, anchor = found[0], found[0][:2]
         meas, fit = measure_lane(detection.pieces, self.profile, p, guide, anchor)
         self.mark('lane')
         self.last_sides = None if fit is None else fit.sides
+        blind = self.lost_for > p.lost_timeout  # the estimate from before is stale
         if meas is not None:
-            self.lost_for = 0.0
-            self.estimate = blend(prior, meas, p.smoothing * meas.confidence) if prior else meas
+            self.lost_for, self.search = 0.0, None
+            self.estimate = blend(prior, meas, p.smoothing * meas.confidence) if (
+                prior and not blind) else meas
         else:
             self.lost_for += dt
             self.estimate = prior
+            if self.search is not None:
+                self.search[1] += abs(self.last[1]) * dt
+                self.search[2] += dt
         if self.memory is not None and meas is not None:
             self.memory.add(*meas.points)
-        if self.estimate is None or self.lost_for > p.lost_timeout:
-            self.last = (0.0, 0.0)
-            if self.memory is not None:
-                self.memory.clear()
-            self.mark('steer')
-            return STOP
-        steered = steer_memory(self.memory, self.estimate, p) if self.memory else None
-        v, omega = (steered or steer(self.estimate, p))[:2]
-        self.last = (v, omega)
+        command = self.command()
+        self.last = (command.linear_x, command.angular_z)
         self.mark('steer')
-        return Command(self.decision(), v, omega)
+        return command
+
+    def command(self):
+        """What to do with the estimate: steer on it (or on the memory) while the lane is seen
+        or lost for less than lost_timeout; then follow the remembered lane while it lasts,
+        search, and stop when the search is done (see the module doc)."""
+        p = self.p
+        if self.estimate is None:
+            return self.give_up()
+        if self.lost_for <= p.lost_timeout:
+            steered = None
+            if self.memory and self.lost_for > 0:  # not seen now: the remembered arc
+                steered = pursue_memory(self.memory, self.estimate, p)
+            if self.memory and steered is None:
+                steered = steer_memory(self.memory, self.estimate, p)
+            v, omega = (steered or steer(self.estimate, p))[:2]
+            return Command(self.decision(), v, omega)
+        if not p.search_angle:
+            return self.give_up()  # the plain stop
+        if self.search is None:
+            pursued = pursue_memory(self.memory, self.estimate, p) if self.memory else None
+            if pursued is not None:
+                return Command(self.decision(), *pursued[:2])
+            self.search = [self.search_direction(), 0.0, 0.0]
+        direction, turned, spent = self.search
+        if turned >= math.radians(p.search_angle) or spent >= p.search_time:
+            return self.give_up()
+        return Command('search', 0.0, direction * p.search_rate)
+
+    def search_direction(self):
+        """+1 (left) or -1: where the lane was last seen going, from the remembered lane's
+        bend, or the estimate's centre line at the look-ahead."""
+        found = remembered_arc(self.memory, self.estimate.arc) if self.memory else None
+        if found is not None and abs(found[0][2]) > 0.2:
+            return math.copysign(1.0, found[0][2])
+        return 1.0 if self.estimate.lateral_at(self.p.lookahead) >= 0 else -1.0
 
     def sent(self, command):
         """The command that went to the wheels: a stop when the loop held the robot (the ROS
         master lost, a late frame, a lost camera) or a frame failed. The lane memory and the
         prediction move with it, not with what this controller asked for."""
         self.last = (command.linear_x, command.angular_z)
+
+    def give_up(self):
+        """No lane, nothing remembered ahead, the search done (or off): stop and forget."""
+        self.estimate, self.search = None, None
+        if self.memory is not None:
+            self.memory.clear()
+        return STOP
 
     def decision(self):
         """'left' or 'right' when the lane's centre lies more than turn_offset lane widths to

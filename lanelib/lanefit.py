@@ -122,15 +122,37 @@ def _points(pieces, reach):
     return x, y, w
 
 
-def _sides(distance, allowed, half, tol):
+def _sides(distance, allowed, half, tol, regions=None):
     """(S, pieces) each piece's side in each lane: the allowed side (allowed: (pieces, 2)
     left, right) whose line, half (S,) from the centre, its points lie nearest on average,
-    within tol; 0 for neither."""
+    within tol; 0 for neither. regions: (weights (pieces,), one-hot (pieces, R)) of the mask
+    regions the pieces were cut from: one region is one tape, so one line; where a lane puts
+    pieces of one region on both its lines (a tape bending across the view, partly lost in a
+    shadow, taken for both), the pieces on the side with less of it are not the lane's."""
     d = distance.reshape(len(distance), len(allowed), POINTS).mean(axis=2)
     half = half[:, None]
     left = np.where(allowed[:, 0], np.abs(d - half), np.inf)
     right = np.where(allowed[:, 1], np.abs(d + half), np.inf)
-    return np.where((left <= right) & (left < tol), 1, np.where(right < tol, -1, 0))
+    sides = np.where((left <= right) & (left < tol), 1, np.where(right < tol, -1, 0))
+    if regions is not None:
+        weight, onehot = regions
+        on_left = ((sides == 1) * weight) @ onehot  # (S, R)
+        on_right = ((sides == -1) * weight) @ onehot
+        side = np.where(on_left >= on_right, 1, -1) @ onehot.T  # (S, pieces): its region's
+        sides = np.where(sides == side, sides, 0)
+    return sides
+
+
+def _regions(pieces):
+    """(weights, one-hot (pieces, R)) of the pieces' mask regions, for _sides; None when
+    no region has more than one piece."""
+    names = [p.region if p.region is not None else ('piece', i) for i, p in enumerate(pieces)]
+    unique = {name: j for j, name in enumerate(dict.fromkeys(names))}
+    if len(unique) == len(names):
+        return None
+    onehot = np.zeros((len(names), len(unique)))
+    onehot[np.arange(len(names)), [unique[n] for n in names]] = 1.0
+    return np.array([p.length for p in pieces]), onehot
 
 
 def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tolerance=0.3,
@@ -163,7 +185,7 @@ def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tole
         target[:2] = anchor
     priors = (weights, target)
     limits = (lane_width * (1 - width_tolerance), lane_width * (1 + width_tolerance))
-    search = (points, allowed, lane_width, priors, limits)
+    search = (points, allowed, lane_width, priors, limits, _regions(pieces))
     if prior is not None:
         found = _fit_seeds(np.array([[*prior, lane_width]], float), *search)
         if found is not None:
@@ -180,13 +202,14 @@ def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tole
     return None if found is None else _lane(pieces, found)
 
 
-def _fit_seeds(seeds, points, allowed, lane_width, priors, limits):
+def _fit_seeds(seeds, points, allowed, lane_width, priors, limits, regions=None):
     """(score, lane, sides, support) of the best lane grown from the seeds (S, 4: e, psi, k,
     width), or None."""
     x, y, w = points
     lanes = seeds
     for tol in TOLERANCES:
-        sides = _sides(_distances(x, y, lanes)[0], allowed, lanes[:, 3] / 2, tol * lane_width)
+        sides = _sides(_distances(x, y, lanes)[0], allowed, lanes[:, 3] / 2, tol * lane_width,
+                       regions)
         on = np.repeat(sides, POINTS, axis=1)
         lanes = fit_lanes(x, y, on, (on != 0) * w, lanes, priors, limits)
         # seeds from pieces of one line mostly grow into one lane: fit it once
@@ -194,7 +217,7 @@ def _fit_seeds(seeds, points, allowed, lane_width, priors, limits):
         lanes = lanes[np.sort(np.unique(grid, axis=0, return_index=True)[1])]
     distance = _distances(x, y, lanes)[0]
     half = lanes[:, 3] / 2
-    sides = _sides(distance, allowed, half, TOLERANCES[-1] * lane_width)
+    sides = _sides(distance, allowed, half, TOLERANCES[-1] * lane_width, regions)
     on = np.repeat(sides, POINTS, axis=1)
     left, right = ((on == 1) * w).sum(axis=1), ((on == -1) * w).sum(axis=1)
     # line in the middle half of the lane, where only floor should be

@@ -229,4 +229,5 @@ def summary(frames, skipped, counts, elapsed, ended):
     fps = frames / elapsed if elapsed > 0 else 0.0
     return (f'kobuki_lane: {frames} frames ({skipped} skipped) in {elapsed:.2f} s, {fps:.1f} '
             f'frames/s: left {counts["left"]}, right {counts["right"]}, straight '
-            f'{counts["straight"]}, none {counts["none"]}; ended: {ended}')
+            f'{counts["straight"]}, none {counts["none"]}'
+            f'{", search %d" % counts["search"] if counts.get("search") else ""}; ended: {ended}')

@@ -124,8 +124,9 @@ def test_one_line_is_enough(straight_scene):
     assert est.confidence < 1.0
 
 
-def test_lane_lost_for_longer_than_the_timeout_stops_the_robot():
-    ctl = make_controller('improved', LaneParams(), improved=ImprovedParams(lost_timeout=0.5))
+def test_without_the_search_a_lane_lost_for_longer_than_the_timeout_stops_the_robot():
+    ctl = make_controller('improved', LaneParams(),
+                          improved=ImprovedParams(lost_timeout=0.5, search_angle=0.0))
     blank = np.full((480, 640, 3), 90, np.uint8)
     track = Track(segments=[{'straight': 8.0}], start=(-1.0, 0.0, 0.0))
     lane = FloorCamera(LECTURE_CAMERA).render(FloorMap(track), track.pose_at(1.0), Scene())
@@ -133,6 +134,82 @@ def test_lane_lost_for_longer_than_the_timeout_stops_the_robot():
     commands = [ctl(ctl.perceive(blank)) for _ in range(4)]
     assert commands[0].linear_x > 0 and commands[1].linear_x > 0  # coasting 0.25, 0.5 s
     assert commands[2].decision == 'none' and commands[2].linear_x == 0.0  # 0.75 s > 0.5 s
+    assert commands[3] == STOP
+
+
+def bend_frames(radius, angle_deg, seen=6):
+    """The lecture's camera approaching a bend along the centre line, `seen` frames 0.05 m
+    apart ending at the bend's start, then a blank floor (the lane out of view)."""
+    track = Track(segments=[{'straight': 2.0}, {'arc': {'radius': radius,
+                                                         'angle_deg': angle_deg}}],
+                  start=(-1.0, 0.0, 0.0))
+    camera, floor = FloorCamera(LECTURE_CAMERA), FloorMap(track)
+    return [camera.render(floor, track.pose_at(0.7 + 0.05 * i), Scene()) for i in range(seen)]
+
+
+def test_with_the_lane_lost_it_follows_the_memory_then_turns_in_place_towards_it_then_stops():
+    """The lane seen bending left, then nothing: drive on along the remembered lane while it
+    lasts, then turn left in place (never forward) for at most search_angle, then stop."""
+    p = ImprovedParams(search_angle=60.0, search_rate=0.5)
+    ctl = make_controller('improved', LaneParams(), improved=p)
+    for frame in bend_frames(0.8, 90):
+        assert ctl(ctl.perceive(frame)).linear_x > 0
+    blank = np.full((480, 640, 3), 90, np.uint8)
+    commands = [ctl(ctl.perceive(blank)) for _ in range(60)]
+    words = [c.decision for c in commands]
+    first_search = words.index('search')
+    assert first_search * 0.25 > p.lost_timeout  # it drove on the memory past the timeout
+    assert all(c.linear_x > 0 for c in commands[:first_search])
+    searching = [c for c in commands if c.decision == 'search']
+    assert all(c.linear_x == 0.0 and c.angular_z == p.search_rate for c in searching)
+    turned = math.degrees(sum(c.angular_z for c in searching) * 0.25)
+    assert p.search_angle <= turned <= p.search_angle + math.degrees(0.5 * 0.25)
+    after = commands[first_search + len(searching):]
+    assert after and all(c == STOP for c in after)  # the search is done: stopped for good
+
+
+def test_the_search_turns_towards_a_right_bend_and_ends_when_the_lane_is_back():
+    ctl = make_controller('improved', LaneParams())
+    frames = bend_frames(0.8, -90)
+    for frame in frames:
+        ctl(ctl.perceive(frame))
+    blank = np.full((480, 640, 3), 90, np.uint8)
+    commands = []
+    while not commands or commands[-1].decision != 'search':
+        commands.append(ctl(ctl.perceive(blank)))
+        assert len(commands) < 40
+    assert commands[-1].angular_z < 0 and commands[-1].linear_x == 0.0  # right, in place
+    back = ctl(ctl.perceive(frames[-1]))  # the lane in view again: drive on
+    assert back.decision != 'search' and back.linear_x > 0
+
+
+@pytest.mark.parametrize('track', ['s_tight', 'hairpin'])
+def test_bends_the_lens_loses_the_lane_on_are_completed_never_searching_forward(track):
+    """The lecture's level webcam on an S-bend whose 0.7 m bend follows at once and on a 0.5 m
+    U-turn: the lane leaves the view, and the run completes, 0 departures; while searching the
+    robot never moves forward."""
+    sent = []
+
+    def recording(name, spec, params):
+        ctl = simulate.controller_for(name, spec, params)
+        decide = ctl.__call__
+
+        class Recorded:
+            def __getattr__(self, attr):
+                return getattr(ctl, attr)
+
+            def __call__(self, detection, t=None):
+                command = decide(detection, t)
+                sent.append(command)
+                return command
+
+        return Recorded()
+
+    result = simulate.run(load_track(track), 'improved', controller_factory=recording)
+    assert result['completed'] and result['departures'] == 0
+    searching = [c for c in sent if c.decision == 'search']
+    assert searching, 'the lane never left the view: the test tests nothing'
+    assert all(c.linear_x == 0.0 and c.angular_z != 0.0 for c in searching)
 
 
 def test_the_improved_controller_completes_a_short_track():
@@ -375,9 +452,23 @@ def test_soak_with_frequent_faults_never_moves_while_blind():
     assert result['ended'] == 'end of input' and result['frames'] == 160
     assert result['longest_gap_s'] <= 0.5 + 1e-9
     assert result['moving_while_camera_out'] == 0
-    assert result['moving_after_lane_lost'] == 0
+    # covered: after lost_timeout only the remembered lane is driven (it reaches 1.2 m at
+    # most), then the robot turns in place, never forward again, within the search angle
+    assert result['blind_forward_m'] <= ImprovedParams().roi_far
+    assert result['forward_after_search'] == 0
+    assert result['search_turn_deg'] <= ImprovedParams().search_angle + 8.0
     assert result['watchdog_stops'] > 0
     assert result['frames_failed'] == result['faults']['pipeline error']  # each one raised
+
+
+def test_soak_without_the_search_never_moves_once_the_lane_is_lost():
+    from tools import soak
+
+    often = {name: (0.16, span) for name, (_, span) in soak.FAULTS.items()}
+    result = soak.soak('oval', 'improved', frames=160, seed=3, progress=False, faults=often,
+                       tuned=dict(search_angle=0.0))
+    assert result['faults']['covered camera'] > 0
+    assert result['moving_after_lane_lost'] == 0
 
 
 def test_soak_counts_commands_inside_fault_intervals():
@@ -387,3 +478,10 @@ def test_soak_counts_commands_inside_fault_intervals():
     assert soak.moving(commands, [[0.5, 2.0]]) == 2
     assert soak.moving(commands, [[0.5, 2.0]], grace=0.6) == 1
     assert soak.moving(commands, [[2.5, 2.9]]) == 0
+    # in [0, 10] after 1 s: 0.2 m/s for two 0.25 s periods, a 0.5 rad/s turn for three, then
+    # forward once more after the search began
+    lost = [(0.5, 0.3, 0.0), (1.5, 0.2, 0.1), (1.75, 0.2, 0.0), (2.0, 0.0, 0.5),
+            (2.25, 0.0, 0.5), (2.5, 0.0, -0.5), (2.75, 0.1, 0.0), (11.0, 0.3, 0.0)]
+    forward, turned, after = soak.blind(lost, [[0.0, 10.0]], 1.0, 4.0)
+    assert forward == pytest.approx(0.125) and after == 1
+    assert turned == pytest.approx(math.degrees(1.5 * 0.25), abs=0.1)

@@ -57,7 +57,7 @@ from lanelib.outputs import Outputs
 from lanelib.rospy_standin import SimClock, StandInRospy, Twist
 from lanelib.safety import SafeBase
 from lanelib.sim.simulator import VARIANTS, apply_variant
-from lanelib.sim.tracks import BUILTIN, load_track
+from lanelib.sim.tracks import LANE_TRACKS, load_track
 from lanelib.sim.world import FloorCamera, FloorMap
 from lanelib.sources import ListSource
 from lanelib.stages import Detection, slope_sum
@@ -196,7 +196,8 @@ def simulator_frames(count, seed=0):
     """`count` onboard views from every built-in track and benchmark condition, at random
     places along the track with offsets up to 6 cm and heading errors up to 8 degrees."""
     rng = np.random.default_rng(seed)
-    specs = [apply_variant(load_track(name), variant) for name in BUILTIN for variant in VARIANTS]
+    specs = [apply_variant(load_track(name), variant) for name in LANE_TRACKS
+             for variant in VARIANTS]
     views = []
     for spec in specs:
         views.append((spec, FloorMap(spec.track, spec.gaps, spec.dashes),

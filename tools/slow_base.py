@@ -17,7 +17,7 @@ from multiprocessing import Pool
 
 from lanelib.sim.base import BaseLimits
 from lanelib.sim.simulator import apply_variant
-from lanelib.sim.tracks import BUILTIN, load_track
+from lanelib.sim.tracks import LANE_TRACKS, load_track
 from simulate import run
 
 BASES = {
@@ -38,7 +38,7 @@ def main(argv=None):
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--jobs', type=int, default=2, help='processes (default 2)')
     args = parser.parse_args(argv)
-    work = [(b, t, v) for b in BASES for v in ('clean', 'gap 20 cm') for t in BUILTIN]
+    work = [(b, t, v) for b in BASES for v in ('clean', 'gap 20 cm') for t in LANE_TRACKS]
     with Pool(max(1, args.jobs)) as pool:
         results = pool.map(_job, work)
     print('| base | track | condition | completed | RMS offset | max offset | mean speed | '

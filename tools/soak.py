@@ -7,14 +7,19 @@ simulated clock, while faults are injected at random (seeded):
 
     camera outage   reads fail for 0.5-4 s (the node stops the robot and reopens the camera)
     slow read       a read takes 0.5-2 s (the watchdog must keep stops coming)
-    covered camera  the frames show no lane for 1.5-4 s (the controller must stop once the lane
-                    has been lost for its lost_timeout)
+    covered camera  the frames show no lane for 1.5-4 s (once the lane has been lost for its
+                    lost_timeout, the improved controller may only drive on along the lane it
+                    remembers, then turn in place to search for it, never forward again, for
+                    at most search_angle, then stop)
     slow frame      the pipeline takes 0.5-1 s on a frame (its result must become a stop)
     pipeline error  the pipeline raises on a frame (a stop, and the loop goes on)
 
 It reports frames, commands, the longest gap between commands, the non-zero commands published
-while the camera was out or after the lane had been lost for lost_timeout (target: 0 each),
-laps, departures, and RSS after 1,000 frames and at the end.
+while the camera was out (target: 0), and while the camera was covered, after the lane had been
+lost for lost_timeout: how far the robot drove on the remembered lane (at most the 1.2 m it
+remembers), how far it turned in place searching (at most search_angle), and the forward
+commands after a search had begun (target: 0); laps, departures, and RSS after 1,000 frames
+and at the end.
 
 With --ros the same loop runs in real time on Debian's ROS 1 instead of the stand-in: a real
 roscore, the node's real rospy publisher, watchdog timer and master watch, and a subscriber in
@@ -43,6 +48,7 @@ import sys
 import tempfile
 import threading
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -181,6 +187,22 @@ class FaultyController:
 
     def sent(self, command):
         self.inner.sent(command)
+
+
+def blind(commands, intervals, grace, rate):
+    """After `grace` seconds of each interval (the lane lost that long): the largest forward
+    distance [m] and in-place turn [deg] commanded in one interval, each command acting for one
+    loop period, and the forward commands that came after an in-place turn (a search) had
+    begun in it."""
+    forward, turned, after_search = 0.0, 0.0, 0
+    for start, end in intervals:
+        inside = [(x, z) for t, x, z in commands if start + grace < t <= end]
+        forward = max(forward, sum(x for x, _ in inside if x > 0) / rate)
+        turns = [i for i, (x, z) in enumerate(inside) if x == 0.0 and z != 0.0]
+        turned = max(turned, math.degrees(sum(abs(inside[i][1]) for i in turns) / rate))
+        if turns:
+            after_search += sum(1 for x, _ in inside[turns[0]:] if x > 0)
+    return round(forward, 3), round(turned, 1), after_search
 
 
 def moving(commands, intervals, grace=0.0):
@@ -338,9 +360,10 @@ def master_figures(world, source, received, watch):
 
 def soak(track='oval', controller='improved', frames=10000, seed=0, progress=True, rate=4.0,
          real_ros=False, handle_signals=False, faults=FAULTS, master_restart=MASTER_RESTART,
-         master_spacing=MASTER_SPACING):
+         master_spacing=MASTER_SPACING, tuned=None):
     """The soak; its figures as a dict. faults: the fault table (FAULTS); master_restart and
-    master_spacing: how often roscore is killed with --ros (MASTER_RESTART, MASTER_SPACING)."""
+    master_spacing: how often roscore is killed with --ros (MASTER_RESTART, MASTER_SPACING);
+    tuned: ImprovedParams fields to change (e.g. search_angle=0, the plain stop)."""
     rng = np.random.default_rng(seed)
     params = LaneParams(rate=rate)
     world = watch = None
@@ -353,7 +376,8 @@ def soak(track='oval', controller='improved', frames=10000, seed=0, progress=Tru
         source = FaultySimulator(track, ros, rng, frames, rate, world, faults)
         spec = load_track(track)
         inner = make_controller(controller, params, LECTURE_CAMERA,
-                                improved_params(spec) if controller == 'improved' else None)
+                                replace(improved_params(spec), **(tuned or {}))
+                                if controller == 'improved' else None)
         base = SafeBase(ros, twist_type)
         follower = LaneFollower(ros, source, FaultyController(inner, source), base,
                                 Outputs(params, progress=Progress(frames, progress)), rate)
@@ -387,6 +411,9 @@ def soak(track='oval', controller='improved', frames=10000, seed=0, progress=Tru
         moving_within_lost_timeout=(moving(source.commands, source.covered) -
                                     moving(source.commands, source.covered,
                                            lost_timeout + 1.0 / params.rate)),
+        **dict(zip(('blind_forward_m', 'search_turn_deg', 'forward_after_search'),
+                   blind(source.commands, source.covered, lost_timeout + 1.0 / params.rate,
+                         params.rate))),
         rss_1000_mb=round(source.rss.get(1000, math.nan), 1),
         rss_end_mb=round(source.rss.get(frames, math.nan), 1),
         rss_growth_mb=round(source.rss.get(frames, math.nan) - source.rss.get(1000, math.nan),

@@ -33,7 +33,7 @@ class TrackError(ValueError):
     """A track file that cannot be used; the message names the file and the field."""
 
 
-BUILTIN = {
+LANE_TRACKS = {
     # regions A (straight), B (left) and C (right) of the lecture's slide at 08:30
     'lecture': dict(segments=[{'straight': 2.0}, {'arc': {'radius': 1.2, 'angle_deg': 90}},
                               {'arc': {'radius': 1.2, 'angle_deg': -90}}, {'straight': 1.5}]),
@@ -47,6 +47,17 @@ BUILTIN = {
     'tight': dict(segments=[{'straight': 1.0}, {'arc': {'radius': 0.9, 'angle_deg': 180}},
                             {'arc': {'radius': 0.9, 'angle_deg': -180}}, {'straight': 1.0}]),
 }
+# Bends the lecture's lens loses the lane on: the improved controller follows the lane it
+# remembers and then searches (lanelib/improved.py). s_tight: the second bend, radius 0.7 m,
+# follows the first at once, and at the inflection the lane leaves the view; hairpin: a U-turn
+# of radius 0.5 m, where from the centre line no tape is in view at all.
+SEARCH_TRACKS = {
+    's_tight': dict(segments=[{'straight': 1.0}, {'arc': {'radius': 1.0, 'angle_deg': 120}},
+                              {'arc': {'radius': 0.7, 'angle_deg': -120}}, {'straight': 1.0}]),
+    'hairpin': dict(segments=[{'straight': 1.0}, {'arc': {'radius': 0.5, 'angle_deg': 180}},
+                              {'straight': 1.0}]),
+}
+BUILTIN = {**LANE_TRACKS, **SEARCH_TRACKS}
 
 
 @dataclass
