@@ -100,8 +100,30 @@ def calibrate(paths, pattern, square, name='camera'):
         raise CalibrationError(f'only {len(used)} of {len(paths)} pictures show the whole '
                                f'{pattern[0]}x{pattern[1]} chessboard; at least 3 are needed '
                                '(10 to 20 at different angles and distances is better)')
-    rms, k, dist, _, _ = cv2.calibrateCamera(object_points, image_points, size, None, None)
+    rms, k, dist, rvecs, tvecs = cv2.calibrateCamera(object_points, image_points, size, None,
+                                                     None)
+    spread = viewpoint_spread(rvecs, tvecs)
+    if spread < 5.0:
+        raise CalibrationError(
+            f'the {len(used)} pictures show the board from one viewpoint (their views differ by '
+            f'{spread:.1f} degrees at most), which does not pin the camera down: take 10 to 20 '
+            'with the board tilted different ways (by 20 degrees and more), at different '
+            'distances and in different parts of the frame')
     return CalibrationResult(Camera(name, k, dist.ravel()[:5], size), float(rms), used, unusable)
+
+
+def viewpoint_spread(rvecs, tvecs):
+    """The largest angle [deg] between two views of the board: between their rotations, or
+    between the directions from the camera to the board."""
+    rotations = [cv2.Rodrigues(r)[0] for r in rvecs]
+    rays = [t.ravel() / np.linalg.norm(t) for t in tvecs]
+    largest = 0.0
+    for i in range(len(rotations)):
+        for j in range(i):
+            turn = np.clip((np.trace(rotations[i].T @ rotations[j]) - 1) / 2, -1.0, 1.0)
+            ray = np.clip(rays[i] @ rays[j], -1.0, 1.0)
+            largest = max(largest, math.degrees(math.acos(turn)), math.degrees(math.acos(ray)))
+    return largest
 
 
 def pattern_size(text):

@@ -25,9 +25,9 @@ safety: a watchdog publishes a stop whenever --watchdog seconds pass without a c
 camera is stopped for at once and reopened for --camera-retry seconds; a frame the pipeline
 fails on is answered with a stop; while the ROS master is gone the robot is held stopped.
 
-exit status: 0 input ended or the node was shut down, 1 camera lost or repeated pipeline
-errors, 2 bad arguments, an unopenable source, no frame at all, or no ROS master, 130 Ctrl-C,
-143 SIGTERM.
+exit status: 0 input ended or the node was shut down, 1 camera lost, repeated pipeline
+errors or an input file cut short, 2 bad arguments, an unopenable source, no frame at all, or
+no ROS master, 130 Ctrl-C, 143 SIGTERM.
 
 This file is the lecture: its settings, its pipeline (detect), its rule, its loop. The rest
 lives in lanelib/ (the speed-up, the improved controller, safety, outputs, ROS plumbing).
@@ -43,19 +43,36 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from lanelib.camera import LECTURE_CAMERA, CalibrationError, load_calibration
-from lanelib.cli import check_output, check_outputs_apart, fail
+from lanelib.camera import (
+    LECTURE_CAMERA,
+    CalibrationError,
+    describe,
+    load_calibration,
+)
+from lanelib.cli import check_arguments, fail
 from lanelib.fast import FastPipeline
 from lanelib.improved import ImprovedController, ImprovedParams
-from lanelib.mounting import read_mounting
+from lanelib.mounting import mounting_settings
 from lanelib.outputs import Outputs, Progress, VideoSink, decision_record, summary
-from lanelib.robot import MAX_ANGULAR, MAX_LINEAR, STOP, VELOCITY_TOPIC, Command, within_limits
-from lanelib.ros import MasterWatch, RosUnavailable, connect_ros, debug_publisher, split_ros_args
-from lanelib.rospy_standin import SimClock, StandInRospy, WallClock
-from lanelib.rospy_standin import Twist as StandInTwist
+from lanelib.robot import (
+    MAX_ANGULAR,
+    MAX_LINEAR,
+    STOP,
+    VELOCITY_TOPIC,
+    Command,
+    within_limits,
+)
+from lanelib.ros import (
+    MasterWatch,
+    RosUnavailable,
+    connect,
+    debug_publisher,
+    private_names,
+    split_ros_args,
+)
 from lanelib.safety import SafeBase, Safety, camera_back, install_signal_handlers
-from lanelib.settings import above, add_arguments, between, resolve, setting
-from lanelib.sources import Prefetch, SourceError, open_source
+from lanelib.settings import above, add_arguments, between, resolve, setting, unknown
+from lanelib.sources import Peeked, Prefetch, SourceError, check_first_frame, open_source
 from lanelib.stages import (
     Detection,
     as_bgr,
@@ -64,6 +81,7 @@ from lanelib.stages import (
     region_of_interest_vertices,
     slope_sum,
 )
+from lanelib.topics import TopicError, camera_from_topic, is_topic, odometry_from
 
 PROG = 'kobuki_lane.py'
 
@@ -202,13 +220,15 @@ class LectureRule:
         return STOP
 
 
-def make_controller(name, params, camera=LECTURE_CAMERA, improved=None, pipeline='fast'):
-    """The lecture's rule (default) or the improved controller (lanelib/improved.py)."""
+def make_controller(name, params, camera=LECTURE_CAMERA, improved=None, pipeline='fast',
+                    odometry=None):
+    """The lecture's rule (default) or the improved controller (lanelib/improved.py), whose
+    lane memory follows `odometry` (lanelib/topics.py) while it comes."""
     if name == 'lecture':
         return LectureRule(params, camera, slides_pipeline(params) if pipeline == 'slides'
                            else None)
     if name == 'improved':
-        return ImprovedController(params, improved, camera)
+        return ImprovedController(params, improved, camera, odometry=odometry)
     raise ValueError(f"controller must be lecture or improved, not '{name}'")
 
 
@@ -223,8 +243,9 @@ class LaneFollower:
     Detection and its frame's time, and told (sent) the command that went out; base: the
     safety.SafeBase every command goes through; outputs: outputs.Outputs; rate [Hz]."""
 
-    def __init__(self, ros, source, controller, base, outputs=None, rate=4.0):
+    def __init__(self, ros, source, controller, base, outputs=None, rate=4.0, log_frames=True):
         self.ros, self.source, self.controller, self.base = ros, source, controller, base
+        self.log_frames = log_frames  # a log line per frame (--quiet: at debug level only)
         self.outputs = outputs or Outputs(LaneParams())
         self.rate = rate
         self.counts = dict(left=0, right=0, straight=0, none=0, search=0)
@@ -252,8 +273,9 @@ class LaneFollower:
         held = self.base.held
         if late or held:
             command = STOP
+        command = within_limits(command)  # what goes to the wheels, and so what is recorded
         self.base.publish(command)
-        self.controller.sent(within_limits(command))  # what it steers on, not what it asked
+        self.controller.sent(command)  # what it steers on, not what it asked for
         record = decision_record(self.frames, label, detection, command, ros.get_time(),
                                  self.controller.extra())
         if late:
@@ -262,11 +284,12 @@ class LaneFollower:
             record['held'] = held
         self.counts[command.decision] += 1
         self.frames += 1
-        ros.loginfo('frame %d (%s): %d lines, theta %+.3f, value %+.3f -> %s '
-                    '(linear.x %.2f, angular.z %+.2f)%s', record['frame'], label,
-                    record['lines'], detection.slopes.theta, detection.slopes.value,
-                    command.decision, command.linear_x, command.angular_z,
-                    ' [late: stopped]' if late else f' [{held}: stopped]' if held else '')
+        (ros.loginfo if self.log_frames else ros.logdebug)(
+            'frame %d (%s): %d lines, theta %+.3f, value %+.3f -> %s (linear.x %.2f, '
+            'angular.z %+.2f)%s', record['frame'], label, record['lines'],
+            detection.slopes.theta, detection.slopes.value, command.decision, command.linear_x,
+            command.angular_z, ' [late: stopped]' if late else f' [{held}: stopped]' if held
+            else '')
         if self.outputs.frame(record, detection, command, ros.get_time()):
             self.request_stop('q pressed')
         return record
@@ -349,14 +372,21 @@ def build_parser():
     io = parser.add_argument_group('input and output')
     io.add_argument('--source', default='0',
                     help='camera index, video file, folder of images (name order), '
-                         "image pattern like 'frames/%%04d.png', or URL (default: 0)")
+                         "image pattern like 'frames/%%04d.png', URL, ROS 1 bag, or a live "
+                         "image topic 'ros:/camera/rgb/image_raw' (a topic ending in "
+                         '/compressed is CompressedImage) (default: 0)')
     io.add_argument('--calibration', default='lecture',
                     help="'lecture' (the lecture's camera matrix, default), 'duckiebot' "
-                         "(Duckietown's default camera), 'none', or a ROS camera_info YAML path")
+                         "(Duckietown's default camera), 'none', a ROS camera_info YAML path, "
+                         "or 'topic': the camera_info beside the --source ros: topic")
     io.add_argument('--mounting', metavar='FILE',
                     help="the improved controller's camera mounting (height, pitch_deg, "
                          'roll_deg, forward), as calibration.py --ground writes it; '
                          '--camera-height and the like, and private parameters, override it')
+    io.add_argument('--odom', metavar='TOPIC',
+                    help="the improved controller's lane memory follows nav_msgs/Odometry on "
+                         "this topic while it comes (default: /odom, kobuki_node's), else "
+                         "dead-reckons on the commands; 'none': always dead reckoning")
     io.add_argument('--dry-run', action='store_true',
                     help='no ROS: record the commands instead of publishing them; over files '
                          'this runs as fast as it can')
@@ -386,7 +416,11 @@ def build_parser():
                          'build with GUI); q quits')
     io.add_argument('--progress', choices=('auto', 'on', 'off'), default='auto',
                     help='progress line on stderr (auto: when stderr is a terminal)')
-    io.add_argument('--quiet', action='store_true', help='no per-frame log lines')
+    io.add_argument('--quiet', action='store_true',
+                    help='no per-frame log lines (on ROS they go to the debug level)')
+    io.add_argument('--open-timeout', type=seconds, default=10.0, metavar='SECONDS',
+                    help='a URL source that gives no stream within this long is given up (exit '
+                         '2), and a read that long is a lost camera (default: 10)')
     io.add_argument('--wait-for-base', type=seconds, default=2.0, metavar='SECONDS',
                     help='on ROS, wait this long for a subscriber (the Kobuki base) before '
                          'the first command (default: 2)')
@@ -417,44 +451,6 @@ def seconds(text):
     return value
 
 
-def check_arguments(args):
-    """Everything about the arguments that can be checked before anything is opened."""
-    if args.stages and not os.path.isdir(args.stages):
-        fail(PROG, f"--stages '{args.stages}': no such folder (make it first)")
-    if args.stages and not os.access(args.stages, os.W_OK):
-        fail(PROG, f"--stages '{args.stages}': folder is not writable")
-    if args.bag_images and not args.bag:
-        fail(PROG, '--bag-images needs --bag FILE')
-    outputs = [(path, what) for path, what in ((args.decisions, '--decisions'),
-                                                (args.video, '--video'), (args.bag, '--bag'))
-               if path]
-    for path, what in outputs:
-        check_output(PROG, path, what)
-    check_outputs_apart(PROG, args.source, outputs, args.stages, args.force)
-    if args.show:
-        if not os.environ.get('DISPLAY') and not os.environ.get('WAYLAND_DISPLAY'):
-            fail(PROG, '--show needs a display (DISPLAY is not set); use --video FILE instead')
-        try:
-            cv2.namedWindow('kobuki_lane')
-        except cv2.error:
-            fail(PROG, '--show needs an OpenCV build with GUI support (pip install '
-                       'opencv-python instead of opencv-python-headless); use --video FILE')
-
-
-def connect(args, private):
-    """(ros, Twist): the headless stand-in for a dry run, else the real rospy, registered."""
-    if args.dry_run:
-        live = args.realtime or args.source.isdigit() or '://' in args.source
-        ros = StandInRospy(WallClock() if live else SimClock(), params=private,
-                           quiet=args.quiet, keep=100)
-        ros.init_node('kobuki_lane')
-        return ros, StandInTwist
-    try:
-        return connect_ros()
-    except RosUnavailable as e:
-        fail(PROG, str(e))
-
-
 def settings_from(args, get_param):
     """The tables and the controller's name: flag > private ROS parameter > default."""
     params = resolve(LaneParams, args, get_param)
@@ -462,22 +458,14 @@ def settings_from(args, get_param):
     name = args.controller or str(get_param('~controller', 'lecture'))
     improved = None
     if name == 'improved':
-        improved = resolve(ImprovedParams, args, get_param, mounting_defaults(args, get_param))
+        mounting = args.mounting or get_param('~mounting', '')
+        improved = resolve(ImprovedParams, args, get_param, mounting_settings(mounting),
+                           f"the mounting file '{mounting}'")
     if 1.0 / params.rate >= safety.watchdog:  # its stops would come between the commands
         raise ValueError(f'rate {params.rate:g} Hz sends a command every {1 / params.rate:.2f} s, '
                          f'but the watchdog stops the robot after {safety.watchdog:g} s without '
                          'one: raise the rate or the watchdog')
     return params, safety, name, improved
-
-
-def mounting_defaults(args, get_param):
-    """The camera settings a --mounting file (or ~mounting) gives; {} without one."""
-    path = args.mounting or get_param('~mounting', '')
-    if not path:
-        return {}
-    m = read_mounting(str(path))  # a MountingError is a ValueError: refused with its message
-    return dict(camera_height=m.height, camera_pitch=m.pitch_deg, camera_forward=m.forward,
-                camera_roll=m.roll_deg)
 
 
 def open_outputs(args, params, ros, source, controller):
@@ -493,6 +481,8 @@ def open_outputs(args, params, ros, source, controller):
             source.release()
             fail(PROG, str(e))
     show_progress = args.progress == 'on' or (args.progress == 'auto' and sys.stderr.isatty())
+    if args.stages:
+        os.makedirs(args.stages, exist_ok=True)  # made now that the run can go
     decisions = open(args.decisions, 'w', encoding='utf-8') if args.decisions else None
     video = VideoSink(args.video, params.rate) if args.video else None
     debug = None if args.dry_run else debug_publisher(ros)
@@ -506,27 +496,50 @@ def main(argv=None, make_controller=make_controller):
     ours, private = split_ros_args(argv)
     parser = build_parser()
     args = parser.parse_args(ours)
-    check_arguments(args)
+    check_arguments(PROG, args)
+    topic = args.source[len('ros:'):] if is_topic(args.source) else None
     try:
-        camera = load_calibration(args.calibration)
+        camera = None if args.calibration == 'topic' else load_calibration(args.calibration)
     except CalibrationError as e:
-        parser.error(str(e))
-    ros, twist_type = connect(args, private)
+        fail(PROG, str(e))
+    live = args.realtime or args.source.isdigit() or '://' in args.source or topic
+    try:
+        ros, twist_type, topic_ros = connect(args.dry_run, live, topic and f'--source {topic}',
+                                             private, args.quiet)
+    except RosUnavailable as e:
+        fail(PROG, str(e))
+    for unknown_name, guess in unknown(private_names(ros), (LaneParams, ImprovedParams, Safety),
+                                       ('controller', 'mounting', 'odom')):
+        ros.logwarn('unknown private parameter ~%s, ignored%s', unknown_name,
+                    f' (did you mean ~{guess}?)' if guess else '')
     try:
         params, safety, name, improved = settings_from(args, ros.get_param)
-        controller = make_controller(name, params, camera, improved, args.pipeline)
-    except (ValueError, TypeError) as e:
-        parser.error(str(e))
-    try:
-        source = open_source(args.source, warn=ros.logwarn, image_topic=args.image_topic)
-    except SourceError as e:
+        if args.calibration == 'topic':
+            camera = camera_from_topic(topic_ros, topic, safety.camera_retry)
+            ros.loginfo('calibration from the first camera_info beside %s: %s', topic,
+                        describe(camera))
+        for warning in improved.clipped() if improved else ():
+            ros.logwarn('%s', warning)
+        odometry = odometry_from(topic_ros, args.odom) if name == 'improved' else None
+        controller = make_controller(name, params, camera, improved, args.pipeline, odometry)
+        source = Peeked(open_source(args.source, warn=ros.logwarn, image_topic=args.image_topic,
+                                    rospy=topic_ros, fresh=safety.watchdog,
+                                    timeout=args.open_timeout))
+        # a calibration measured at a size (a file, the topic) must fit the frames; the
+        # lecture's camera has no size on the slides and scales to any frame
+        check_first_frame(source, None if args.calibration == 'lecture' else camera,
+                          ros.logwarn)
+    except (ValueError, TypeError, SourceError, TopicError) as e:
         fail(PROG, str(e))
+    except KeyboardInterrupt:  # Ctrl-C while a URL did not answer: OpenCV may still be waiting
+        print(f'{PROG}: interrupted while opening {args.source}', file=sys.stderr, flush=True)
+        os._exit(130)
     outputs = open_outputs(args, params, ros, source, controller)
     base = SafeBase(ros, twist_type, safety, record=outputs.bag and outputs.bag.twist)
     # last, so that no early exit leaves its thread inside OpenCV (that aborts the process)
     if not source.live:
         source = Prefetch(source)  # decode the next frames on the second core
-    follower = LaneFollower(ros, source, controller, base, outputs, params.rate)
+    follower = LaneFollower(ros, source, controller, base, outputs, params.rate, not args.quiet)
     install_signal_handlers(follower.request_stop)
     lane = getattr(controller, 'profile', None)
     ros.loginfo('kobuki_lane: source %s, %s controller%s, algorithm %s, calibration %s, %.1f Hz '
@@ -545,18 +558,23 @@ def main(argv=None, make_controller=make_controller):
             watch.stop()
         source.release()
         outputs.close()
-        if not args.dry_run:
-            time.sleep(0.3)  # let rospy's sender thread deliver the final zero Twist
-            ros.signal_shutdown(follower.ended or 'exception')
+        if topic_ros is not None:
+            time.sleep(0.0 if args.dry_run else 0.3)  # deliver the final zero Twist
+            topic_ros.signal_shutdown(follower.ended or 'exception')
+    status = finish(ended, follower, source)  # its words first, the summary last
+    if outputs.stages:
+        print(f'--stages: {outputs.stage_files} pictures, {outputs.stage_bytes / 1e6:.1f} MB in '
+              f'{outputs.stages}', file=sys.stderr)
     print(summary(follower.frames, source.skipped, follower.counts, time.monotonic() - start,
                   ended), file=sys.stderr)
-    return finish(ended, follower, source, ros)
+    return status
 
 
-def finish(ended, follower, source, ros):
+def finish(ended, follower, source):
     """The exit status, and a last word where the run did not end well."""
     if ended == 'camera lost':
-        print(f"{PROG}: error: camera lost: no frame from '{source.name}'", file=sys.stderr)
+        why = f': {source.silence()}' if hasattr(source, 'silence') else ''
+        print(f"{PROG}: error: camera lost: no frame from '{source.name}'{why}", file=sys.stderr)
     if ended == 'pipeline errors':
         print(f'{PROG}: error: {follower.errors} frames in a row failed in the pipeline (see '
               'the log above)', file=sys.stderr)
@@ -564,8 +582,12 @@ def finish(ended, follower, source, ros):
         fail(PROG, f"no frame could be read from '{source.name}' (corrupt, truncated or an "
                    'unsupported format?)')
     read = follower.frames + source.skipped
-    if ended == 'end of input' and source.total and read < source.total - 1:
-        ros.logwarn('the input ended after %d of its %d frames (truncated?)', read, source.total)
+    short = source.total and read < source.total - 1
+    if ended == 'end of input' and (short or getattr(source, 'cut_short', False)):
+        print(f"{PROG}: error: '{source.name}' is truncated: "
+              f"{f'it ended after {read} of its {source.total} frames' if short else 'cut short'}"
+              f', {follower.frames} acted on', file=sys.stderr)
+        return 1
     return EXIT_STATUS.get(ended, 0)
 
 

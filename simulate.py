@@ -48,6 +48,8 @@ from lanelib.camera import CAMERAS
 from lanelib.cli import check_output, fail
 from lanelib.mounting import MountingError, parse_pattern, read_mounting
 from lanelib.outputs import Outputs
+from lanelib.robot import ODOM_TOPIC
+from lanelib.rospy_standin import Odometry as OdometryMessage
 from lanelib.rospy_standin import SimClock, StandInRospy, Twist
 from lanelib.safety import SafeBase
 from lanelib.sim.base import BaseLimits
@@ -61,31 +63,36 @@ from lanelib.sim.simulator import (
 )
 from lanelib.sim.tracks import BUILTIN, TrackError, load_track, with_world
 from lanelib.sim.world import WORLDS, chessboard_view
+from lanelib.topics import Odometry
 
 PROG = 'simulate.py'
 
 
 # ---------------------------------------------------------------- runs
 
-def controller_for(name, spec, params, mounting=None):
+def controller_for(name, spec, params, mounting=None, odometry=None):
     """kobuki_lane's controller, told the track's camera; the improved one also its mounting
-    (or `mounting`, e.g. from a --mounting file) and lane."""
+    (or `mounting`, e.g. from a --mounting file), lane and odometry."""
     return make_controller(name, params, CAMERAS[spec.camera],
-                           improved_params(spec, mounting) if name == 'improved' else None)
+                           improved_params(spec, mounting) if name == 'improved' else None,
+                           odometry=odometry)
 
 
 def run(spec, controller='lecture', seed=0, video=None, plot=None, time_limit=None,
         keep_going=False, start_offset=0.0, start_yaw=0.0, limits=None,
-        controller_factory=controller_for):
+        controller_factory=controller_for, odometry=False):
     """One closed-loop run; returns the metrics dict. controller_factory(name, spec,
-    params): the controller to drive with (controller_for: kobuki_lane's, told the track)."""
+    params): the controller to drive with (controller_for: kobuki_lane's, told the track).
+    odometry: the base publishes /odom through the stand-in and the improved controller's lane
+    memory follows it (factory called with odometry=topics.Odometry)."""
     ros = StandInRospy(SimClock(), quiet=True)
     sim = TrackSimulator(spec, ros, seed, time_limit, keep_going, start_offset, start_yaw,
-                         limits)
+                         limits, odometry)
     params = LaneParams()
     topdown = TopDown(sim) if (video or plot) else None
     sink = SideBySide(video, params.rate, topdown) if video else None
-    ctl = controller_factory(controller, spec, params)
+    odom = Odometry(ros, ODOM_TOPIC, msg_type=OdometryMessage) if odometry else None
+    ctl = controller_factory(controller, spec, params, **({'odometry': odom} if odom else {}))
     follower = LaneFollower(ros, sim, ctl, SafeBase(ros, Twist),
                             Outputs(params, video=sink, draw=getattr(ctl, 'draw', None)),
                             params.rate)
@@ -224,6 +231,16 @@ def build_parser():
                        help='base acceleration limit [m/s^2], 0 for none, at most 10')
     scene.add_argument('--latency', type=ranged(0, 2), default=0.05,
                        help='publish to wheels [s], 0 to 2 (default 0.05)')
+    scene.add_argument('--odometry', action='store_true',
+                       help="the base publishes odometry on /odom and the improved "
+                            "controller's lane memory follows it, as on the robot (default: "
+                            'dead reckoning on the commands)')
+    scene.add_argument('--slip', type=ranged(0, 0.5), default=0.0,
+                       help='with --odometry: the wheels turn this fraction more than the robot '
+                            'moves, 0 to 0.5')
+    scene.add_argument('--odom-noise', type=ranged(0, 1), default=0.0,
+                       help="with --odometry: sigma of odometry's turn rate error [rad/s], "
+                            '0 to 1')
     board = parser.add_argument_group('a chessboard on the floor, for calibration.py --ground')
     board.add_argument('--chessboard', metavar='FILE',
                        help="write what the track's camera, mounted as it is, sees of a "
@@ -339,10 +356,11 @@ def main(argv=None):
             factory = functools.partial(controller_for, mounting=read_mounting(args.mounting))
         except MountingError as e:
             fail(PROG, f'--mounting: {e}')
-    limits = BaseLimits(accel=args.accel, alpha=args.accel * 4, latency=args.latency)
+    limits = BaseLimits(accel=args.accel, alpha=args.accel * 4, latency=args.latency,
+                        slip=args.slip, odom_noise=args.odom_noise)
     result = run(spec, args.controller, args.seed, args.video, args.plot, args.time_limit,
                  args.keep_going, args.start_offset, math.radians(args.start_yaw), limits,
-                 factory)
+                 factory, args.odometry)
     print(f"{result['track']} / {result['controller']}: "
           f"{'completed' if result['completed'] else 'ended: ' + result['ended']}, "
           f"progress {result['progress']:.0%}, {result['distance_m']:.2f} m in "

@@ -10,19 +10,15 @@ Bags written here open in Debian's `rosbag info` and `rosbag.Bag`; the tests che
 """
 
 import os
+import sys
+import threading
 import time
 
 import cv2
-import numpy as np
+
+from lanelib.imagemsg import ImageMessageError, decode_image
 
 IMAGE_TYPES = ('sensor_msgs/msg/Image', 'sensor_msgs/msg/CompressedImage')
-ENCODINGS = {  # encoding: (dtype, channels, conversion to BGR or None)
-    'bgr8': (np.uint8, 3, None), '8UC3': (np.uint8, 3, None),
-    'rgb8': (np.uint8, 3, cv2.COLOR_RGB2BGR),
-    'bgra8': (np.uint8, 4, cv2.COLOR_BGRA2BGR), 'rgba8': (np.uint8, 4, cv2.COLOR_RGBA2BGR),
-    'mono8': (np.uint8, 1, None), '8UC1': (np.uint8, 1, None),
-    'mono16': (np.uint16, 1, None), '16UC1': (np.uint16, 1, None),
-}
 DEBUG_TOPIC = '/kobuki_lane/debug_image/compressed'
 
 
@@ -41,13 +37,17 @@ def _describe(connections):
     return ', '.join(f'{t} ({m})' for t, m in topics) or 'no topics at all'
 
 
+_UNREAD = object()  # BagSource._first before the first frame is read
+
+
 class BagSource:
     """Image messages from a ROS 1 bag as frames; labels are the message stamps' seconds."""
 
     live = False
-    skipped = 0
 
-    def __init__(self, path, topic=None):
+    def __init__(self, path, topic=None, warn=None):
+        self.skipped = 0
+        self._warn = warn or (lambda msg: print(f'warning: {msg}', file=sys.stderr))
         from rosbags.rosbag1 import Reader, ReaderError
 
         self.name = str(path)
@@ -75,31 +75,26 @@ class BagSource:
         self.topic = topic
         self.total = sum(c.msgcount for c in chosen)
         self._messages = self._reader.messages(connections=chosen)
+        self._first = _UNREAD
         self._first = self._next_frame()  # fails here, not mid-run, on a bad encoding
 
     def _decode(self, conn, raw):
         msg = self._store.deserialize_ros1(raw, conn.msgtype)
-        if conn.msgtype.endswith('CompressedImage'):
-            frame = cv2.imdecode(np.asarray(msg.data, np.uint8), cv2.IMREAD_UNCHANGED)
-            if frame is None:
-                raise BagError(f"'{self.name}': a CompressedImage on '{self.topic}' "
-                               f"('{msg.format}') does not decode")
-            return frame
-        if msg.encoding not in ENCODINGS:
-            raise BagError(f"'{self.name}': images on '{self.topic}' are '{msg.encoding}'; "
-                           f"supported: {', '.join(ENCODINGS)}")
-        dtype, channels, conversion = ENCODINGS[msg.encoding]
-        dt = np.dtype(dtype).newbyteorder('>' if msg.is_bigendian else '<')
-        rows = np.frombuffer(bytes(msg.data), np.uint8).reshape(msg.height, msg.step)
-        frame = rows[:, :msg.width * channels * dt.itemsize].copy().view(dt)
-        frame = frame.reshape(msg.height, msg.width, channels).astype(dtype)
-        if channels == 1:
-            frame = frame[:, :, 0]
-        return cv2.cvtColor(frame, conversion) if conversion is not None else frame
+        try:
+            return decode_image(msg, conn.msgtype.endswith('CompressedImage'),
+                                f"'{self.topic}' in '{self.name}'")
+        except ImageMessageError as e:
+            raise BagError(str(e)) from None
 
     def _next_frame(self):
         for conn, stamp, raw in self._messages:
-            return True, self._decode(conn, raw), round(stamp * 1e-9, 6)
+            try:
+                return True, self._decode(conn, raw), round(stamp * 1e-9, 6)
+            except BagError as e:
+                if self._first is _UNREAD:
+                    raise  # the first frame: the bag cannot be used as asked, said at start
+                self.skipped += 1  # later ones: skipped, said, counted, as unreadable files
+                self._warn(f'skipped a frame at {stamp * 1e-9:.3f} s: {e}')
         return False, None, None
 
     def read(self):
@@ -112,10 +107,53 @@ class BagSource:
         self._reader.close()
 
 
-class BagRecorder:
-    """Writes what the node sends into a new ROS 1 bag; close() makes it complete."""
+HEADER_AT = 13  # [bytes] the bag header record follows the '#ROSBAG V2.0' line
 
-    def __init__(self, path, command_topic, images=False):
+
+def bag_header(index_pos=0, connections=0, chunks=0):
+    """The bag header record as Debian's rosbag writes it: the header padded with spaces to
+    4096 bytes, 4104 with the two lengths. rosbags pads the record to 4096 in all, and
+    `rosbag reindex`, rewriting the header its own way, then overwrote the first 8 bytes of the
+    first chunk: a killed bag could not be mended."""
+    import struct
+
+    fields = [(b'op', b'\x03'), (b'index_pos', struct.pack('<Q', index_pos)),
+              (b'conn_count', struct.pack('<I', connections)),
+              (b'chunk_count', struct.pack('<I', chunks))]
+    header = b''.join(struct.pack('<I', len(k) + 1 + len(v)) + k + b'=' + v for k, v in fields)
+    return (struct.pack('<I', len(header)) + header + struct.pack('<I', 4096 - len(header)) +
+            b' ' * (4096 - len(header)))
+
+
+def _write_header(path_or_file, index_pos=0, connections=0, chunks=0):
+    path_or_file.seek(HEADER_AT)
+    path_or_file.write(bag_header(index_pos, connections, chunks))
+
+
+def _read_header_counts(f):
+    """(index_pos, conn_count, chunk_count) of the header record at HEADER_AT."""
+    import struct
+
+    f.seek(HEADER_AT)
+    size = struct.unpack('<I', f.read(4))[0]
+    data, values, at = f.read(size), {}, 0
+    while at < size:
+        n = struct.unpack('<I', data[at:at + 4])[0]
+        name, value = data[at + 4:at + 4 + n].split(b'=', 1)
+        values[name] = value
+        at += 4 + n
+    return (struct.unpack('<Q', values[b'index_pos'])[0],
+            struct.unpack('<I', values[b'conn_count'])[0],
+            struct.unpack('<I', values[b'chunk_count'])[0])
+
+
+class BagRecorder:
+    """Writes what the node sends into a new ROS 1 bag; close() makes it complete. Every
+    `flush_every` seconds what has come is written out as a chunk and flushed to the disk, so
+    a run killed outright (SIGKILL, power loss) loses at most that last stretch, and
+    `rosbag reindex` makes the rest readable."""
+
+    def __init__(self, path, command_topic, images=False, flush_every=1.0):
         from rosbags.rosbag1 import Writer
 
         if os.path.exists(path):
@@ -124,6 +162,7 @@ class BagRecorder:
         self._store = typestore()
         self._writer = Writer(path)
         self._writer.open()
+        _write_header(self._writer.bio)  # Debian's layout, so rosbag reindex can mend it
         self._twist = self._writer.add_connection(command_topic, 'geometry_msgs/msg/Twist',
                                                   typestore=self._store)
         self._image = (self._writer.add_connection(DEBUG_TOPIC, 'sensor_msgs/msg/CompressedImage',
@@ -131,6 +170,24 @@ class BagRecorder:
         self.images = images
         self._seq = 0
         self._epoch = None
+        self._lock = threading.Lock()  # the watchdog's timer records its stops too
+        self._flush_every, self._flushed = flush_every, time.monotonic()
+
+    def _flush(self):
+        """The open chunk to the file, and the file to the disk (rosbag reindex cannot mend a
+        chunk without messages: a chunk is written once it has some)."""
+        writer = self._writer
+        if writer.chunks[-1].connections:
+            writer.write_chunk(writer.chunks[-1])
+        writer.bio.flush()
+        os.fsync(writer.bio.fileno())
+        self._flushed = time.monotonic()
+
+    def _write(self, connection, ns, data):
+        with self._lock:
+            self._writer.write(connection, ns, data)
+            if time.monotonic() - self._flushed >= self._flush_every:
+                self._flush()
 
     def _ns(self, t):
         # a dry run's simulated clock starts at 0: such times are put after the wall time the
@@ -147,8 +204,8 @@ class BagRecorder:
         msg = types['geometry_msgs/msg/Twist'](linear=vector(x=float(linear_x), y=0.0, z=0.0),
                                                angular=vector(x=0.0, y=0.0,
                                                               z=float(angular_z)))
-        self._writer.write(self._twist, self._ns(t),
-                           self._store.serialize_ros1(msg, 'geometry_msgs/msg/Twist'))
+        self._write(self._twist, self._ns(t),
+                    self._store.serialize_ros1(msg, 'geometry_msgs/msg/Twist'))
 
     def image(self, t, bgr):
         if self._image is None:
@@ -163,8 +220,11 @@ class BagRecorder:
         msg = types['sensor_msgs/msg/CompressedImage'](header=header, format='jpeg',
                                                        data=jpg.ravel())
         self._seq += 1
-        self._writer.write(self._image, ns,
-                           self._store.serialize_ros1(msg, 'sensor_msgs/msg/CompressedImage'))
+        self._write(self._image, ns,
+                    self._store.serialize_ros1(msg, 'sensor_msgs/msg/CompressedImage'))
 
     def close(self):
-        self._writer.close()
+        with self._lock:
+            self._writer.close()  # the index, and rosbags' own header: Debian's again
+            with open(self.path, 'r+b') as f:
+                _write_header(f, *_read_header_counts(f))

@@ -132,8 +132,43 @@ def read_camera_info(path):
     if model not in ('plumb_bob', 'rational_polynomial'):
         raise CalibrationError(f"{path}: field 'distortion_model' is '{model}'; "
                                "only plumb_bob and rational_polynomial are supported")
+    if not np.allclose(k[2], [0.0, 0.0, 1.0]) or k[1, 0] != 0:
+        raise CalibrationError(f"{path}: field 'camera_matrix' is not a camera matrix "
+                               '([fx, 0, cx, 0, fy, cy, 0, 0, 1])')
     dist = _matrix(doc, 'distortion_coefficients', 1, None, path)
-    return Camera(str(doc.get('camera_name', path)), k, dist, tuple(size))
+    camera = Camera(str(doc.get('camera_name', path)), k, dist, tuple(size))
+    problem = folds(camera)
+    if problem:
+        raise CalibrationError(f"{path}: field 'distortion_coefficients' "
+                               f'{np.array2string(dist, precision=3)} {problem}; recalibrate')
+    return camera
+
+
+def folds(camera):
+    """Why undistorting with this camera would ruin frames, or None: its distortion folds the
+    image (a row or column of the undistorted frame runs backwards) or leaves most of it
+    empty (k1 = 50 does both)."""
+    w, h = camera.image_size
+    mx, my = cv2.initUndistortRectifyMap(camera.matrix, camera.distortion, None, camera.matrix,
+                                         (w, h), cv2.CV_32FC1)
+    inside = np.mean((mx >= 0) & (mx < w) & (my >= 0) & (my < h))
+    if inside < 0.5:
+        return f'leaves {100 * (1 - inside):.0f} % of the undistorted frame empty'
+    row, column = mx[h // 2], my[:, w // 2]
+    if not (np.all(np.diff(row) > 0) and np.all(np.diff(column) > 0)):
+        return 'folds the image (its middle row or column runs backwards)'
+    return None
+
+
+def aspect_problem(camera, width, height):
+    """Why a calibration made at another aspect ratio cannot be used on width x height frames
+    (scaling it would stretch the image), or None."""
+    cw, ch = camera.image_size
+    if abs(cw / ch - width / height) > 0.01 * width / height:
+        return (f"the calibration '{camera.name}' is for {cw}x{ch} frames, these are "
+                f'{width}x{height}: another aspect ratio, which scaling cannot mend; calibrate '
+                'at this size (calibration.py --images) or set the camera to it')
+    return None
 
 
 def camera_info_yaml(camera):

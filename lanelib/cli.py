@@ -4,6 +4,8 @@
 import os
 import sys
 
+import cv2
+
 from lanelib.settings import output_problem
 
 
@@ -54,3 +56,30 @@ def check_outputs_apart(prog, source, outputs, stages, force):
     if stages and where and os.path.realpath(stages) == where:
         fail(prog, f"--stages '{stages}' is the --source folder; its pictures would be read as "
                    'frames')
+
+
+def check_arguments(prog, args):
+    """Everything about the arguments that can be checked before anything is opened."""
+    if args.stages:  # a folder that exists, or one to make in a folder that does
+        if os.path.exists(args.stages) and not os.path.isdir(args.stages):
+            fail(prog, f"--stages '{args.stages}': not a folder")
+        problem = output_problem(os.path.join(args.stages, 'x') if os.path.isdir(args.stages)
+                                 else args.stages)
+        if problem:
+            fail(prog, f"--stages '{args.stages}': {problem}")
+    if args.bag_images and not args.bag:
+        fail(prog, '--bag-images needs --bag FILE')
+    outputs = [(path, what) for path, what in ((args.decisions, '--decisions'),
+                                                (args.video, '--video'), (args.bag, '--bag'))
+               if path]
+    for path, what in outputs:
+        check_output(prog, path, what)
+    check_outputs_apart(prog, args.source, outputs, args.stages, args.force)
+    if args.show:
+        if not os.environ.get('DISPLAY') and not os.environ.get('WAYLAND_DISPLAY'):
+            fail(prog, '--show needs a display (DISPLAY is not set); use --video FILE instead')
+        try:
+            cv2.namedWindow('kobuki_lane')
+        except cv2.error:
+            fail(prog, '--show needs an OpenCV build with GUI support (pip install '
+                       'opencv-python instead of opencv-python-headless); use --video FILE')

@@ -52,7 +52,7 @@ from lanelib.geometry import Mounting, floor_to_pixels, floor_to_row
 from lanelib.lanefit import LaneFit, find_lane, fit_lanes, signed_distance
 from lanelib.lanes import load_lane
 from lanelib.outputs import draw_curve, text_band, tint
-from lanelib.robot import STOP, Command, arc_step
+from lanelib.robot import MAX_ANGULAR, MAX_LINEAR, STOP, Command, arc_step
 from lanelib.settings import between, finite, fraction, non_negative, positive, setting
 from lanelib.stages import Detection, as_bgr, slope_sum
 
@@ -114,7 +114,7 @@ class ImprovedParams:
                                       'this far ahead', 'm', positive)
     memory_window: float = setting(0.25, 'with memory: fit the points this far either side of '
                                    'the look-ahead', 'm', positive)
-    search_angle: float = setting(90.0, 'lane lost and nothing remembered ahead: turn in place '
+    search_angle: float = setting(45.0, 'lane lost and nothing remembered ahead: turn in place '
                                   'towards where it was last seen going, up to this angle, then '
                                   'stop; 0: no search, stop at once', 'deg', between(0, 360))
     search_rate: float = setting(0.5, 'turn rate while searching', 'rad/s', positive)
@@ -130,6 +130,18 @@ class ImprovedParams:
     def mounting(self):
         return Mounting(self.camera_height, self.camera_pitch, self.camera_forward,
                         self.camera_roll)
+
+    def clipped(self):
+        """Warnings for settings the Kobuki's limits will cut down (every command is clipped
+        to them, and recorded as sent)."""
+        said = []
+        for name, value, limit, unit in (('v_max', self.v_max, MAX_LINEAR, 'm/s'),
+                                         ('v_min', self.v_min, MAX_LINEAR, 'm/s'),
+                                         ('omega_max', self.omega_max, MAX_ANGULAR, 'rad/s')):
+            if value > limit:
+                said.append(f'{name} = {value:g} {unit} is above the Kobuki\'s {limit:.2f} '
+                            f'{unit}: commands are clipped to it')
+        return said
 
 
 @dataclass
@@ -232,9 +244,8 @@ def fit_centre(x, y, w, ridge=0.05, x0=0.0):
     return float(a - b * x0 + c * x0 ** 2), float(b - 2 * c * x0), float(c)
 
 
-def predict(est, v, omega, dt):
-    """The centre line as seen after driving `dt` seconds at (v, omega)."""
-    ds, dtheta = v * dt, omega * dt
+def predict(est, ds, dtheta):
+    """The centre line as seen after the robot drove `ds` [m] and turned `dtheta` [rad]."""
     a = est.a + est.b * ds + est.c * ds ** 2
     b = est.b + 2 * est.c * ds - dtheta * (1 + est.b ** 2)
     return replace(est, a=a, b=b, confidence=est.confidence * 0.8)
@@ -275,7 +286,18 @@ class LaneMemory:
         self._local = None  # local()'s answer until the robot moves or points come or go
 
     def move(self, v, omega, dt):
+        """Dead reckoning: `dt` seconds at (v, omega)."""
         self.pose = np.array(arc_step(*self.pose, v, omega, dt))
+        self.t += dt
+        self.chunks = [c for c in self.chunks if self.t - c[0] <= self.seconds]
+        self._local = None
+
+    def move_by(self, ahead, left, turned, dt):
+        """The robot moved `ahead` and `left` [m] and turned `turned` [rad] (in its frame before
+        the move) in `dt` seconds: from odometry, or dead reckoning."""
+        px, py, yaw = self.pose
+        c, s = math.cos(yaw), math.sin(yaw)
+        self.pose = np.array([px + c * ahead - s * left, py + s * ahead + c * left, yaw + turned])
         self.t += dt
         self.chunks = [c for c in self.chunks if self.t - c[0] <= self.seconds]
         self._local = None
@@ -389,7 +411,7 @@ class ImprovedController:
     name = 'improved'
 
     def __init__(self, lane_params, p=None, camera=LECTURE_CAMERA, profile=None,
-                 mark=None):
+                 mark=None, odometry=None):
         p = p or ImprovedParams()
         self.mark = mark or (lambda stage: None)
         self.profile = profile or load_lane(p.lane)
@@ -400,6 +422,7 @@ class ImprovedController:
         self.piece_length = max(0.25 * self.p.lane_width,
                                 3 * max(self.profile.left.width, self.profile.right.width))
         self.camera = camera
+        self.odometry = odometry  # a topics.Odometry: the memory follows it while it comes
         self.dt = 1.0 / lane_params.rate
         self.cluttered = False  # the last frame had more than max_pieces pieces of line
         self.last_sides = None  # the side of each piece of the last frame (pictures)
@@ -416,6 +439,7 @@ class ImprovedController:
         """Forget the lane: the next frame is read as if it were the first."""
         self.estimate, self.lost_for, self.last = None, math.inf, (0.0, 0.0)
         self.t = None  # when the last frame was read
+        self.odom_pose = None  # the odometry's pose at the last frame, while it comes
         self.search = None  # while searching: [direction, angle turned [rad], time [s]]
         self.memory = LaneMemory(self.p.memory) if self.p.memory > 0 else None
 
@@ -489,16 +513,43 @@ class ImprovedController:
         dt = max(0.0, t - last)
         return self.dt if abs(dt - self.dt) < 1e-6 else dt  # a clock's rounding is no motion
 
+    def regained(self, meas, anchor):
+        """Whether a lane found after the robot drove and turned blind is the one it lost: the
+        robot has not left its lane (it would have been a departure), so it is inside the lane
+        found, and where the memory puts it (anchor: its offset in the remembered lane)."""
+        return abs(meas.a) <= 0.75 * self.p.lane_width
+
+    def moved(self, t):
+        """How odometry says the robot moved since the last frame, in the robot's frame then:
+        (ahead [m], left [m], turned [rad]); None while it does not come (then the controller
+        dead-reckons on the command sent)."""
+        pose = self.odometry.pose(t) if (self.odometry is not None and t is not None) else None
+        last, self.odom_pose = self.odom_pose, pose
+        if pose is None or last is None:
+            return None
+        dx, dy = pose[0] - last[0], pose[1] - last[1]
+        c, s = math.cos(last[2]), math.sin(last[2])
+        turned = math.atan2(math.sin(pose[2] - last[2]), math.cos(pose[2] - last[2]))
+        return c * dx + s * dy, -s * dx + c * dy, turned
+
     def __call__(self, detection, t=None):
         """The command for one frame's detection; t: when the frame was read [s] (ROS time)."""
         p = self.p
         dt = self.elapsed(t)
         self.cluttered = detection.cluttered
-        prior = predict(self.estimate, *self.last, dt) if self.estimate else None
+        moved = self.moved(t)  # by odometry: (ahead, left, turned); else dead reckoning
+        if moved is None:
+            ds, dtheta = self.last[0] * dt, self.last[1] * dt
+        else:
+            ds, dtheta = math.copysign(math.hypot(moved[0], moved[1]), moved[0]), moved[2]
+        prior = predict(self.estimate, ds, dtheta) if self.estimate else None
         guide = prior  # the centre line the segments are sorted to left and right against
         anchor = None  # where the lane is at the robot: the prior's, or the memory's
         if self.memory is not None:
-            self.memory.move(*self.last, dt)
+            if moved is None:
+                self.memory.move(*self.last, dt)
+            else:
+                self.memory.move_by(*moved, dt)
             remembered = self.memory.centre_line(0.2, 1.2, 0.3)
             if remembered is not None and prior is not None:
                 guide = replace(prior, a=remembered[0], b=remembered[1], c=remembered[2])
@@ -513,6 +564,8 @@ class ImprovedController:
         self.mark('lane')
         self.last_sides = None if fit is None else fit.sides
         blind = self.lost_for > p.lost_timeout  # the estimate from before is stale
+        if blind and meas is not None and not self.regained(meas, anchor):
+            meas = None  # another lane (the far leg of a U-turn): keep searching
         if meas is not None:
             self.lost_for, self.search = 0.0, None
             self.estimate = blend(prior, meas, p.smoothing * meas.confidence) if (

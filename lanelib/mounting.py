@@ -210,3 +210,13 @@ def read_mounting(path):
         raise MountingError(f"{path}: field 'pitch_deg' must be -45 to 80 and 'roll_deg' "
                             '-45 to 45')
     return Mounting(**values)
+
+
+def mounting_settings(path):
+    """The improved controller's camera settings (ImprovedParams fields) in a mounting YAML;
+    {} for no path. MountingError (a ValueError) names the field at fault."""
+    if not path:
+        return {}
+    m = read_mounting(str(path))
+    return dict(camera_height=m.height, camera_pitch=m.pitch_deg, camera_forward=m.forward,
+                camera_roll=m.roll_deg)

@@ -103,11 +103,14 @@ def contact_sheet(pictures, width=320, columns=4):
 
 def write_stages(folder, index, pictures):
     """NNNN_K_stage.png for each (key, title, image) of frame NNNN, and NNNN_sheet.png with
-    all of them."""
+    all of them; returns (files, bytes) written."""
+    paths = []
     for k, (key, _, image) in enumerate(pictures):
-        cv2.imwrite(os.path.join(folder, f'{index:04d}_{k}_{key}.png'), image)
-    cv2.imwrite(os.path.join(folder, f'{index:04d}_sheet.png'),
-                contact_sheet([(title, image) for _, title, image in pictures]))
+        paths.append(os.path.join(folder, f'{index:04d}_{k}_{key}.png'))
+        cv2.imwrite(paths[-1], image)
+    paths.append(os.path.join(folder, f'{index:04d}_sheet.png'))
+    cv2.imwrite(paths[-1], contact_sheet([(title, image) for _, title, image in pictures]))
+    return len(paths), sum(os.path.getsize(path) for path in paths if os.path.exists(path))
 
 
 def decision_record(index, label, detection, command, t, extra):
@@ -182,6 +185,7 @@ class Outputs:
     def __init__(self, p, decisions=None, video=None, stages=None, bag=None, debug=None,
                  show=False, progress=None, draw=None, pictures=None):
         self.p, self.decisions, self.video, self.stages = p, decisions, video, stages
+        self.stage_files = self.stage_bytes = 0  # what --stages has written
         self.bag, self.show, self.draw = bag, show, draw or annotate
         self.pictures = pictures or (lambda d, c, p: lecture_pictures(d, c, p, self.draw))
         self.debug, self.debug_message = debug or (None, None)
@@ -196,7 +200,9 @@ class Outputs:
         """A frame's record and pictures; True if the window's user pressed q."""
         self.write(record)
         if self.stages:
-            write_stages(self.stages, record['frame'], self.pictures(detection, command, self.p))
+            files, size = write_stages(self.stages, record['frame'],
+                                       self.pictures(detection, command, self.p))
+            self.stage_files, self.stage_bytes = self.stage_files + files, self.stage_bytes + size
         quit_pressed = False
         sinks = self._picture_sinks(t)
         if sinks or self.show:  # the annotated picture is drawn only when something takes it

@@ -9,6 +9,7 @@ import math
 from dataclasses import dataclass
 
 VELOCITY_TOPIC = '/mobile_base/commands/velocity'  # kobuki_node's velocity command input
+ODOM_TOPIC = '/odom'  # kobuki_node's odometry (nav_msgs/Odometry)
 MAX_LINEAR = 0.7  # [m/s] the Kobuki's top speed
 MAX_ANGULAR = math.pi  # [rad/s] the Kobuki's top turn rate
 COMMAND_TIMEOUT = 0.6  # [s] the driver stops the wheels after this long without a command

@@ -31,6 +31,16 @@ def split_ros_args(argv):
     return ours, private
 
 
+def private_names(ros):
+    """The names of the node's private parameters: the stand-in's _name:=value, or those on
+    the parameter server under the node's name."""
+    if hasattr(ros, 'params'):
+        return list(ros.params)
+    prefix = ros.get_name() + '/'
+    return sorted({name[len(prefix):].split('/')[0] for name in ros.get_param_names()
+                   if name.startswith(prefix)})
+
+
 def master_online(timeout=3.0):
     """True if the ROS master at ROS_MASTER_URI answers within `timeout` seconds."""
     import rosgraph
@@ -43,7 +53,30 @@ def master_online(timeout=3.0):
         socket.setdefaulttimeout(old)
 
 
-def connect_ros(name='kobuki_lane'):
+def connect(dry_run, live, topics, private, quiet):
+    """(ros, Twist, topic_ros): for a dry run the headless stand-in (on the wall clock for a
+    live source), else the real rospy, registered; topic_ros is the real rospy that reads
+    topics (a ros: source, camera_info, odometry), also in a dry run when `topics` asks for
+    it, else None. RosUnavailable says what is missing."""
+    if not dry_run:
+        rospy, twist = connect_ros()
+        return rospy, twist, rospy
+    from lanelib.rospy_standin import SimClock, StandInRospy, Twist, WallClock
+
+    ros = StandInRospy(WallClock() if live else SimClock(), params=private, quiet=quiet,
+                       keep=100)
+    ros.init_node('kobuki_lane')
+    topic_ros = None
+    if topics:
+        try:
+            topic_ros = connect_ros('kobuki_lane_dry_run', anonymous=True)[0]
+        except RosUnavailable as e:
+            raise RosUnavailable(f'{topics} reads a ROS topic, so even a dry run needs a ROS '
+                                 f'master: {e}') from None
+    return ros, Twist, topic_ros
+
+
+def connect_ros(name='kobuki_lane', anonymous=False):
     """The real rospy and Twist, with the node registered (rospy reads _name:=value itself);
     RosUnavailable if ROS is not installed or no master answers."""
     try:
@@ -57,7 +90,7 @@ def connect_ros(name='kobuki_lane'):
         raise RosUnavailable(f'no ROS master answers at {uri}; start roscore (or roslaunch '
                              'kobuki_node minimal.launch), or use --dry-run')
     # our own signal handlers send the stop before rospy is told to shut down
-    rospy.init_node(name, disable_signals=True)
+    rospy.init_node(name, anonymous=anonymous, disable_signals=True)
     return rospy, Twist
 
 
@@ -106,12 +139,21 @@ class MasterWatch:
             return False
 
     def _register_again(self):
+        """Register the node's publications and subscriptions (a camera topic, odometry) with
+        the master again, and tell the node who publishes what it subscribes to."""
         from rospy.impl.registration import get_topic_manager
 
         master, me, api = self._master(), self.rospy.get_name(), self.rospy.get_node_uri()
-        topics = get_topic_manager().get_publications()
+        manager = get_topic_manager()
+        topics = manager.get_publications()
         for topic, data_type in topics:
             master.registerPublisher(me, topic, data_type, api)
+        node = xmlrpc.client.ServerProxy(api, transport=TimeoutTransport(self.timeout))
+        for topic, data_type in manager.get_subscriptions():
+            code, _, publishers = master.registerSubscriber(me, topic, data_type, api)
+            if code == 1:
+                node.publisherUpdate('/master', topic, publishers)
+            topics.append((topic, data_type))
         return [topic for topic, _ in topics]
 
     def _watch(self):

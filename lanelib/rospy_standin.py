@@ -1,15 +1,17 @@
 """A thin stand-in for rospy and geometry_msgs/Twist, so the node's loop runs with no ROS at all.
 
-It offers only the calls kobuki_lane.py makes (init_node, Publisher, Rate, Timer, Duration,
-is_shutdown, on_shutdown, signal_shutdown, get_param, get_time, sleep, loginfo/logwarn/logerr,
-ROSInterruptException) with rospy's semantics, on a clock you choose:
+It offers only the calls kobuki_lane.py makes (init_node, Publisher, Subscriber, Rate, Timer,
+Duration, is_shutdown, on_shutdown, signal_shutdown, get_param, get_time, sleep,
+logdebug/loginfo/logwarn/logerr, ROSInterruptException) with rospy's semantics, and
+nav_msgs/Odometry for the simulator's odometry, on a clock you choose:
 
     SimClock()   simulated time: Rate.sleep() advances it instantly, firing timers on the way
                  (tests, fast dry runs, the simulator)
     WallClock()  real time: Rate.sleep() really sleeps (dry runs with --realtime)
 
 Published messages are recorded in `StandInRospy.published` as (time_s, topic, message)
-instead of being sent, and handed to any `listeners` (the simulator's robot base); log lines
+instead of being sent, and handed to any `listeners` (the simulator's robot base) and to the
+Subscribers of their topic (the lane memory's odometry in the simulator); log lines
 in `log_lines`. keep=N remembers only the last N of each, so a long dry run does not grow.
 tests/test_ros_real.py runs the same loop against Debian's real rospy and checks that what a
 real subscriber receives matches, so the two cannot drift apart.
@@ -35,6 +37,34 @@ class Twist:
 
     linear: Vector3 = field(default_factory=Vector3)
     angular: Vector3 = field(default_factory=Vector3)
+
+
+@dataclass
+class Quaternion:
+    x: float = 0.0
+    y: float = 0.0
+    z: float = 0.0
+    w: float = 1.0
+
+
+@dataclass
+class Pose:
+    position: Vector3 = field(default_factory=Vector3)
+    orientation: Quaternion = field(default_factory=Quaternion)
+
+
+@dataclass
+class PoseWithCovariance:
+    pose: Pose = field(default_factory=Pose)
+
+
+@dataclass
+class Odometry:
+    """nav_msgs/Odometry, as far as the lane memory reads it: pose.pose (position,
+    orientation), and twist.twist."""
+
+    pose: PoseWithCovariance = field(default_factory=PoseWithCovariance)
+    twist: Twist = field(default_factory=Twist)
 
 
 class ROSException(Exception):
@@ -157,12 +187,28 @@ class Publisher:
         self._ros.published.append((now, self.name, msg))
         for listener in self._ros.listeners:
             listener(now, self.name, msg)
+        for callback in list(self._ros.subscribers.get(self.name, ())):
+            callback(msg)
 
     def get_num_connections(self):
         return 1  # the recorder always listens
 
     def unregister(self):
         pass
+
+
+class Subscriber:
+    """Messages published through the same StandInRospy on `topic` reach `callback` at once,
+    on the publisher's thread."""
+
+    def __init__(self, ros, topic, data_class, callback, queue_size=None, buff_size=None):
+        self._ros, self.name, self.callback = ros, topic, callback
+        ros.subscribers.setdefault(topic, []).append(callback)
+
+    def unregister(self):
+        callbacks = self._ros.subscribers.get(self.name, [])
+        if self.callback in callbacks:
+            callbacks.remove(self.callback)
 
 
 class StandInRospy:
@@ -176,6 +222,7 @@ class StandInRospy:
         self.params = dict(params or {})
         self.published = deque(maxlen=keep)
         self.listeners = []  # callables (time, topic, message): a simulated robot listens here
+        self.subscribers = {}  # topic: [callback]: Subscriber's
         self.log_lines = deque(maxlen=keep)
         self._quiet = quiet
         self._shutdown_reason = None
@@ -204,6 +251,9 @@ class StandInRospy:
     # communication and time
     def Publisher(self, topic, data_class, queue_size=None):
         return Publisher(self, topic, data_class, queue_size)
+
+    def Subscriber(self, topic, data_class, callback, queue_size=None, buff_size=None):
+        return Subscriber(self, topic, data_class, callback, queue_size, buff_size)
 
     def Rate(self, hz):
         return Rate(self, hz)
@@ -234,6 +284,9 @@ class StandInRospy:
         stream = sys.stdout if level == 'INFO' else sys.stderr
         if level != 'INFO' or not self._quiet:
             print(f'[{level}] [{self.clock.now():.3f}]: {text}', file=stream, flush=True)
+
+    def logdebug(self, msg, *args):
+        self.log_lines.append(('DEBUG', msg % args if args else msg))
 
     def loginfo(self, msg, *args):
         self._emit('INFO', msg, args)

@@ -28,8 +28,8 @@ def read_yaml(path, error, what='YAML'):
     try:
         with open(path, encoding='utf-8') as f:
             return yaml.safe_load(f)
-    except (OSError, yaml.YAMLError) as e:
-        raise error(f'{path}: cannot read as {what}: {e}') from None
+    except (OSError, yaml.YAMLError) as e:  # on one line: YAML's own message has several
+        raise error(f"{path}: cannot read as {what}: {' '.join(str(e).split())}") from None
 
 
 def setting(default, help, unit='', check=None, choices=None):
@@ -108,18 +108,47 @@ def add_arguments(group, table):
                                 f'{f"; {within}" if within else ""}')
 
 
-def resolve(table, args, get_param, defaults=None):
-    """Flag given > private ROS parameter (~name) > `defaults` (a dict, e.g. from a file) > the
-    table's default; ValueError if out of range."""
-    values, defaults = {}, defaults or {}
+PARAMETER = ('the private ROS parameter ~{name}: _{name}:=... on the command line, a launch '
+             "file, or one an earlier run left on the parameter server ('rosparam delete "
+             "/kobuki_lane/{name}' removes it)")
+
+
+def resolve(table, args, get_param, defaults=None, file=None):
+    """Flag given > private ROS parameter (~name) > `defaults` (a dict, from `file`) > the
+    table's default; a ValueError that names the setting, where its value came from, and its
+    range when the value is out of it or of the wrong kind."""
+    values, defaults, came = {}, defaults or {}, {}
     for f in dataclasses.fields(table):
         flag = getattr(args, f.name)
-        value = flag if flag is not None else get_param('~' + f.name,
-                                                        defaults.get(f.name, f.default))
+        fallback = defaults.get(f.name, f.default)
+        value = flag if flag is not None else get_param('~' + f.name, fallback)
+        came[f.name] = ('--' + f.name.replace('_', '-') if flag is not None else
+                        PARAMETER.format(name=f.name) if value is not fallback else
+                        file if f.name in defaults else None)
         kind = _kind(f)
-        if kind is float and isinstance(value, (int, float)) and not isinstance(value, bool):
+        if kind in (int, float) and (isinstance(value, bool) or
+                                     not isinstance(value, (int, float))):
+            raise ValueError(f'{f.name} = {value!r} is not a number (from '
+                             f'{came[f.name] or "the default"}): {f.metadata["help"]}')
+        if kind is float:
             value = float(value)
         elif kind is str:
             value = str(value)
         values[f.name] = value
-    return validate(table(**values))
+    try:
+        return validate(table(**values))
+    except ValueError as e:
+        name = str(e).split(' ', 1)[0].rstrip(':')
+        if came.get(name):
+            raise ValueError(f'{e} (from {came[name]})') from None
+        raise
+
+
+def unknown(names, tables, others=()):
+    """Of the private parameter names given, those no table (nor `others`) has, each with the
+    likeliest name meant ('' when none is close)."""
+    import difflib
+
+    known = {f.name for table in tables for f in dataclasses.fields(table)} | set(others)
+    return [(name, (difflib.get_close_matches(name, known, n=1) or [''])[0])
+            for name in sorted(set(names) - known)]

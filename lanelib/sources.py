@@ -5,6 +5,7 @@
     frames/%04d.png      an image-sequence pattern   cv2.VideoCapture(pattern)
     rtsp://..., http://  any URL VideoCapture takes  cv2.VideoCapture(url)    live
     run.bag              a ROS 1 bag's image topic   bags.BagSource (--image-topic)
+    ros:/camera/image    a live ROS image topic      topics.TopicSource              live
     samples/track/       a folder of images, read in name order
     picture.png          one image
 
@@ -19,6 +20,8 @@ import threading
 
 import cv2
 
+from lanelib.camera import aspect_problem
+
 IMAGE_EXTENSIONS = ('.png', '.jpg', '.jpeg', '.bmp', '.tif', '.tiff', '.webp', '.pgm', '.ppm',
                     '.pnm')
 
@@ -30,24 +33,67 @@ class SourceError(Exception):
 class CaptureSource:
     """Frames from cv2.VideoCapture: camera, video file, image-sequence pattern or URL."""
 
-    def __init__(self, spec, capture_arg, live):
+    def __init__(self, spec, capture_arg, live, timeout=None, warn=None):
         self.name = str(spec)
         self.live = live
         self.skipped = 0
         self._index = 0
         self.total = None
         self._arg = capture_arg
-        self._cap = cv2.VideoCapture(capture_arg)
+        self._timeout = timeout  # [s] for a URL: give up opening or reading after this long
+        if timeout is not None and warn is not None:
+            warn(f"opening '{spec}': waiting up to {timeout:g} s for it to answer "
+                 '(--open-timeout; Ctrl-C gives up)')
+        self._cap = self._open()
         if not self._cap.isOpened():
             self._cap.release()
             what = f'camera {spec}' if isinstance(capture_arg, int) else f"'{spec}'"
+            if timeout is not None:
+                raise SourceError(f'cannot open {what}: no stream from it within {timeout:g} s '
+                                  '(check the URL and that the server is up, or raise '
+                                  '--open-timeout)')
             raise SourceError(f'cannot open {what} with OpenCV VideoCapture '
                               '(check the index, path or URL, and that the format is readable)')
         count = int(self._cap.get(cv2.CAP_PROP_FRAME_COUNT))
         if not live and count > 0:
             self.total = count
+        self._ahead = None
+        self._warn = warn or (lambda msg: print(f'warning: {msg}', file=sys.stderr))
+        self.cut_short = not live and riff_cut_short(str(capture_arg))
+
+    def _open(self):
+        """cv2.VideoCapture; for a URL with its open and read timeouts, on a thread of its own so
+        that Ctrl-C is heard while OpenCV waits (KeyboardInterrupt in the caller)."""
+        if self._timeout is None:
+            return cv2.VideoCapture(self._arg)
+        ms = int(self._timeout * 1000)
+        opened = []
+        worker = threading.Thread(target=lambda: opened.append(cv2.VideoCapture(
+            self._arg, cv2.CAP_FFMPEG, [cv2.CAP_PROP_OPEN_TIMEOUT_MSEC, ms,
+                                        cv2.CAP_PROP_READ_TIMEOUT_MSEC, ms])),
+            name='open-url', daemon=True)
+        worker.start()
+        while worker.is_alive():
+            worker.join(0.1)
+        return opened[0]
 
     def read(self):
+        if self.live:
+            return self._read()
+        # a video file is read one frame ahead: the last frame of a file cut short (an AVI
+        # whose RIFF header promises more bytes than there are) decodes only in part, and is
+        # not handed out
+        if self._ahead is None:
+            self._ahead = self._read()
+        item, self._ahead = self._ahead, self._read()
+        if item[0] and not self._ahead[0] and self.cut_short:
+            self.skipped += 1
+            self._warn(f"'{self.name}' is cut short (truncated): its last frame, {item[2]}, "
+                       'did not decode whole and is not used')
+            return self._ahead
+        return item
+
+    def _read(self):
         ok, frame = self._cap.read()
         if not ok or frame is None:
             return False, None, self._index
@@ -58,7 +104,7 @@ class CaptureSource:
     def reopen(self):
         """Open the camera or stream again (after it stopped giving frames); True if it opened."""
         self._cap.release()
-        self._cap = cv2.VideoCapture(self._arg)
+        self._cap = self._open()
         return self._cap.isOpened()
 
     def release(self):
@@ -116,6 +162,45 @@ class ListSource:
         pass
 
 
+class Peeked:
+    """A source whose first frame has been read already (`first`: its read() result), so that
+    its size can be checked before the run; read() hands it out first."""
+
+    def __init__(self, source):
+        self.source = source
+        self.name, self.live, self.total = source.name, source.live, source.total
+        self.first = source.read()
+        self._first = self.first
+
+    @property
+    def skipped(self):
+        return self.source.skipped
+
+    def read(self):
+        if self._first is not None:
+            item, self._first = self._first, None
+            return item
+        return self.source.read()
+
+    def __getattr__(self, name):  # reopen, release, silence: the source's own
+        if name == 'source':
+            raise AttributeError(name)
+        return getattr(self.source, name)
+
+
+BIG = 4_000_000  # [pixels] frames larger than this take long (an 8000x6000 one: 7.5 s, 1.1 GB)
+
+
+def size_warning(frame):
+    """A word for frames so large that each takes seconds, or None."""
+    h, w = frame.shape[:2]
+    if h * w <= BIG:
+        return None
+    return (f'frames are {w}x{h} ({h * w / 1e6:.0f} megapixels): each takes seconds and much '
+            'memory (an 8000x6000 one took 7.5 s and 1.1 GB); the lecture used 640x480, so '
+            'scale them down first (e.g. ffmpeg -vf scale=640:-1, or the camera driver)')
+
+
 class Prefetch:
     """Reads a file source ahead on a second thread, so decoding overlaps processing; the
     loop gets the same frames in the same order. Not for live sources: a queue of frames
@@ -168,6 +253,23 @@ class Prefetch:
         self._thread.join(timeout=5)
         self.source.release()
 
+    def __getattr__(self, name):  # cut_short and the like: the source's own
+        if name == 'source':
+            raise AttributeError(name)
+        return getattr(self.source, name)
+
+
+def riff_cut_short(path):
+    """True if a RIFF file (AVI) is shorter than its header says: a recording cut off by a
+    crash or a copy that stopped (cv2.VideoCapture reads it without a word)."""
+    if not os.path.isfile(path):
+        return False
+    with open(path, 'rb') as f:
+        head = f.read(12)
+    if len(head) < 12 or head[:4] != b'RIFF' or head[8:12] != b'AVI ':
+        return False
+    return int.from_bytes(head[4:8], 'little') + 8 > os.path.getsize(path)
+
 
 def is_image_file(path):
     return path.lower().endswith(IMAGE_EXTENSIONS)
@@ -186,25 +288,36 @@ def truncated(path):
         return marker not in f.read()
 
 
-def open_source(spec, warn=None, image_topic=None):
-    """Open what --source names; SourceError if it cannot be opened."""
+def open_source(spec, warn=None, image_topic=None, rospy=None, fresh=0.4, timeout=10.0):
+    """Open what --source names; SourceError if it cannot be opened. rospy: the real rospy,
+    for a live image topic (ros:TOPIC), whose frames older than `fresh` seconds are not used;
+    timeout [s]: how long a URL may take to answer (KeyboardInterrupt on Ctrl-C meanwhile)."""
     spec = str(spec)
+    if spec.startswith('ros:'):
+        from lanelib.topics import TopicSource
+
+        topic = spec[len('ros:'):]
+        if rospy is None or not topic.startswith('/'):
+            raise SourceError(f"cannot open '{spec}': give a topic name after ros:, e.g. "
+                              'ros:/camera/rgb/image_raw, and a ROS master')
+        return TopicSource(rospy, topic, fresh=fresh, wait=fresh)
     if spec.lower().endswith('.bag') and os.path.isfile(spec):
         from lanelib.bags import BagError, BagSource
 
         try:
-            return BagSource(spec, image_topic)
+            return BagSource(spec, image_topic, warn)
         except BagError as e:
             raise SourceError(str(e)) from None
     if spec.isdigit():
         return CaptureSource(spec, int(spec), live=True)
     if '://' in spec:
-        return CaptureSource(spec, spec, live=True)
+        return CaptureSource(spec, spec, live=True, timeout=timeout,
+                             warn=warn or (lambda msg: print(f'warning: {msg}', file=sys.stderr)))
     if '%' in spec:
         folder = os.path.dirname(spec) or '.'
         if not os.path.isdir(folder):
             raise SourceError(f"cannot open '{spec}': folder '{folder}' does not exist")
-        return CaptureSource(spec, spec, live=False)
+        return CaptureSource(spec, spec, live=False, warn=warn)
     if os.path.isdir(spec):
         files = sorted(os.path.join(spec, f) for f in os.listdir(spec) if is_image_file(f))
         if not files:
@@ -221,4 +334,23 @@ def open_source(spec, warn=None, image_topic=None):
         if truncated(spec):
             raise SourceError(f"cannot open '{spec}': the image is truncated")
         return FolderSource(spec, [spec], warn)
-    return CaptureSource(spec, spec, live=False)
+    return CaptureSource(spec, spec, live=False, warn=warn)
+
+
+def check_first_frame(source, camera, warn):
+    """Before anything runs (no output made yet): a file source with no readable frame, and a
+    calibration for another aspect ratio, are refused (SourceError); frames that would take
+    seconds each are said to."""
+    ok, frame, _ = source.first
+    if not ok and not source.live:  # refused before any output is made
+        source.release()
+        raise SourceError(f"no frame could be read from '{source.name}' (corrupt, truncated or "
+                          'an unsupported format?)')
+    if not ok:
+        return
+    problem = camera is not None and aspect_problem(camera, frame.shape[1], frame.shape[0])
+    if problem:
+        source.release()
+        raise SourceError(problem)
+    if size_warning(frame):
+        warn('%s', size_warning(frame))

@@ -9,7 +9,7 @@ import sys
 import cv2
 import numpy as np
 import pytest
-from helpers import NODE, REPO, SAMPLES, wait_until
+from helpers import NODE, REPO, SAMPLES, read_jsonl, wait_until
 
 from kobuki_lane import main
 from lanelib.bags import BagSource
@@ -165,3 +165,58 @@ def test_ctrl_c_leaves_a_bag_that_opens(tmp_path):
     assert proc.returncode == 130, err
     twists = read_twists(out)
     assert 3 <= len(twists) < 29 and twists[-1][1:] == (0.0, 0.0)
+
+
+def test_an_image_whose_size_does_not_match_its_data_is_refused_at_start_and_skipped_later(
+        tmp_path):
+    """Before: a traceback (exit 1), at start or in the middle of the run."""
+    import rosbag
+    import rospy
+
+    frames = samples(3)
+    short = ros_image(frames[0], 'bgr8')
+    short.height += 10  # says more rows than it holds
+    for name, order in (('first.bag', [short] + [ros_image(f, 'bgr8') for f in frames[1:]]),
+                        ('middle.bag', [ros_image(frames[0], 'bgr8'), short,
+                                        ros_image(frames[2], 'bgr8')])):
+        path = tmp_path / name
+        with rosbag.Bag(str(path), 'w') as bag:
+            for i, msg in enumerate(order):
+                bag.write('/cam', msg, rospy.Time(1700000000 + i))
+        out = tmp_path / (name + '.jsonl')
+        proc = subprocess.run([sys.executable, NODE, '--source', str(path), '--dry-run',
+                               '--quiet', '--decisions', str(out)], cwd=REPO,
+                              capture_output=True, text=True, timeout=60)
+        assert 'Traceback' not in proc.stderr, proc.stderr
+        assert 'holds 921600 bytes (needs 490 rows of at least 1920)' in proc.stderr
+        if name == 'first.bag':
+            assert proc.returncode == 2 and not out.exists()
+        else:
+            assert proc.returncode == 0 and len(read_jsonl(out)) == 2
+            assert '(1 skipped)' in proc.stderr
+
+
+def test_a_bag_from_a_killed_run_loses_at_most_the_last_second_after_rosbag_reindex(tmp_path):
+    """Before: 86 bytes after 16 frames (all still in memory), and with --bag-images a file
+    that `rosbag reindex` could not mend (it rewrote rosbags' shorter header over the first
+    chunk). Now a chunk goes to the disk every second, in Debian's header layout."""
+    import signal
+
+    bag, decisions = tmp_path / 'killed.bag', tmp_path / 'd.jsonl'
+    node = subprocess.Popen([sys.executable, NODE, '--source', SAMPLES, '--dry-run',
+                             '--realtime', '--quiet', '--bag', str(bag), '--bag-images',
+                             '--decisions', str(decisions)], cwd=REPO,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    wait_until(lambda: decisions.exists() and len(read_jsonl(decisions)) >= 14, 60,
+               '14 frames decided')
+    node.send_signal(signal.SIGKILL)
+    node.wait(timeout=30)
+    decided = len(read_jsonl(decisions))
+    fix = subprocess.run(['rosbag', 'reindex', str(bag)], capture_output=True, text=True,
+                         timeout=120)
+    assert fix.returncode == 0, fix.stderr
+    twists = read_twists(bag)
+    assert decided - 4 <= len(twists) <= decided  # at most the last second (4 frames) lost
+    info = subprocess.run(['rosbag', 'info', str(bag)], capture_output=True, text=True,
+                          timeout=60)
+    assert info.returncode == 0 and '/kobuki_lane/debug_image/compressed' in info.stdout

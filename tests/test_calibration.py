@@ -181,3 +181,72 @@ def test_the_tool_says_when_it_cannot_calibrate(tmp_path, capsys):
     assert 'no files match' in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(['--images', 'x', '--pattern', '9by6'])
+
+
+def node(*args):
+    import subprocess
+    import sys
+
+    from helpers import NODE, REPO
+
+    return subprocess.run([sys.executable, NODE, *args], cwd=REPO, capture_output=True,
+                          text=True, timeout=120)
+
+
+@pytest.mark.parametrize('change, said', [
+    (('0, 0, 1]', '0, 0, 0]'), "'camera_matrix' is not a camera matrix"),  # singular
+    (('[-0.1, 0.01,', '[50, 0.01,'), 'leaves'),  # k1 = 50: most of the frame empty
+    (('camera_name: usb_cam', 'camera_name: [usb'), 'cannot read as YAML'),  # a syntax error
+])
+def test_a_camera_yaml_that_would_ruin_every_frame_is_refused_in_one_line(tmp_path, change,
+                                                                         said):
+    """Before: a singular matrix or k1 = 50 loaded, then every frame failed in OpenCV (exit 1
+    after 5 frames); a YAML syntax error printed the whole usage before its message."""
+    path = tmp_path / 'camera.yaml'
+    path.write_text(ROS_YAML.replace(*change))
+    proc = node('--source', SAMPLES, '--dry-run', '--calibration', str(path))
+    assert proc.returncode == 2 and said in proc.stderr, proc.stderr
+    assert 'usage:' not in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+    assert 'Traceback' not in proc.stderr
+
+
+def test_a_calibration_for_another_aspect_ratio_is_refused_before_the_run(tmp_path):
+    """Before: a 1280x720 calibration was silently stretched onto 640x480 frames."""
+    path = tmp_path / 'wide.yaml'
+    path.write_text(ROS_YAML.replace('image_width: 640', 'image_width: 1280')
+                    .replace('image_height: 480', 'image_height: 720'))
+    decisions = tmp_path / 'd.jsonl'
+    proc = node('--source', SAMPLES, '--dry-run', '--calibration', str(path), '--decisions',
+                str(decisions))
+    assert proc.returncode == 2 and 'is for 1280x720 frames, these are 640x480' in proc.stderr
+    assert not decisions.exists()
+    same_shape = tmp_path / 'half.yaml'  # 320x240: the same 4:3, scaled as before
+    same_shape.write_text(ROS_YAML.replace('image_width: 640', 'image_width: 320')
+                          .replace('image_height: 480', 'image_height: 240'))
+    assert node('--source', SAMPLES, '--dry-run', '--calibration', str(same_shape),
+                '--quiet').returncode == 0
+
+
+def test_a_huge_first_frame_is_said_to_be_slow(tmp_path):
+    big = tmp_path / 'big'
+    big.mkdir()
+    cv2.imwrite(str(big / 'a.png'), np.full((2400, 3200, 3), 90, np.uint8))
+    proc = node('--source', str(big), '--dry-run', '--calibration', 'none', '--quiet')
+    assert proc.returncode == 0 and 'frames are 3200x2400 (8 megapixels)' in proc.stderr
+
+
+def test_calibrating_from_copies_of_one_picture_is_refused(chessboards, tmp_path, capsys):
+    """Five copies of one view do not pin the camera down (before: fx 670, fy 449, k3 57.9
+    written without a word)."""
+    import shutil
+
+    one = sorted(chessboards.glob('*.png'))[0]
+    copies = tmp_path / 'copies'
+    copies.mkdir()
+    for i in range(5):
+        shutil.copy(one, copies / f'{i}.png')
+    out = tmp_path / 'camera.yaml'
+    assert main(['--images', str(copies / '*.png'), '--pattern', '9x6', '--square', '0.025',
+                 '-o', str(out)]) == 2
+    err = capsys.readouterr().err
+    assert 'one viewpoint' in err and not out.exists()

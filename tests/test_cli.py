@@ -16,6 +16,8 @@ from helpers import NODE, REPO, SAMPLES, read_jsonl, run_as_nobody
 import kobuki_lane
 from kobuki_lane import LaneParams, LectureRule, detect, main
 from lanelib.camera import LECTURE_CAMERA
+from lanelib.improved import ImprovedParams
+from lanelib.safety import Safety
 
 KEYS = ('frame', 'source', 'lines', 'theta', 'value', 'decision', 'linear_x', 'angular_z')
 
@@ -291,11 +293,18 @@ def test_lane_memory_can_be_turned_off_but_not_made_negative(tmp_path):
 
 
 def test_a_folder_of_nothing_readable_is_an_error_not_an_empty_run(tmp_path):
-    (tmp_path / 'a.jpg').write_bytes(b'not a jpeg')
-    (tmp_path / 'b.png').write_bytes(b'\x89PNG\r\n')
-    proc = cli('--source', str(tmp_path), '--dry-run', '--quiet')
+    """And no output is made (before: an emptied decisions file and a one-message bag, so the
+    run again was refused as 'exists already')."""
+    folder = tmp_path / 'frames'
+    folder.mkdir()
+    (folder / 'a.jpg').write_bytes(b'not a jpeg')
+    (folder / 'b.png').write_bytes(b'\x89PNG\r\n')
+    outputs = ['--decisions', str(tmp_path / 'd.jsonl'), '--bag', str(tmp_path / 'c.bag'),
+               '--video', str(tmp_path / 'v.avi'), '--stages', str(tmp_path / 'st')]
+    proc = cli('--source', str(folder), '--dry-run', '--quiet', *outputs)
     assert proc.returncode == 2 and 'no frame could be read' in proc.stderr
     assert 'Traceback' not in proc.stderr
+    assert sorted(os.listdir(tmp_path)) == ['frames']
 
 
 def test_truncated_images_are_refused_or_skipped(tmp_path):
@@ -319,8 +328,32 @@ def test_a_truncated_video_is_read_as_far_as_it_goes(tmp_path):
     cut = tmp_path / 'cut.avi'
     cut.write_bytes(data[:len(data) // 2])
     proc = cli('--source', str(cut), '--dry-run', '--quiet')
-    assert proc.returncode == 0 and 'Traceback' not in proc.stderr
-    assert 'ended after 10 of its 20 frames (truncated?)' in proc.stderr
+    assert proc.returncode == 1 and 'Traceback' not in proc.stderr
+    assert 'is truncated: it ended after 10 of its 20 frames, 9 acted on' in proc.stderr
+
+
+def test_the_half_decoded_last_frame_of_a_cut_video_is_not_acted_on(tmp_path):
+    """A video cut inside its last frame: OpenCV decodes that frame in part without a word
+    (270 rows wrong in the issue's case, and acted on); now it is left out, said before the
+    summary, and the run ends with status 1."""
+    path = str(tmp_path / 'v.avi')
+    writer = cv2.VideoWriter(path, cv2.VideoWriter_fourcc(*'MJPG'), 4, (640, 480))
+    names = sorted(os.listdir(SAMPLES))
+    for name in names:
+        writer.write(cv2.imread(os.path.join(SAMPLES, name)))
+    writer.release()
+    data = open(path, 'rb').read()
+    last = data.rfind(b'\xff\xd8')  # the last frame's JPEG
+    cut = tmp_path / 'cut.avi'
+    cut.write_bytes(data[:last + (len(data) - last) // 3])
+    out = tmp_path / 'd.jsonl'
+    proc = cli('--source', str(cut), '--dry-run', '--quiet', '--decisions', str(out))
+    assert proc.returncode == 1
+    assert len(read_jsonl(out)) == len(names) - 1
+    said = proc.stderr.index(f'its last frame, {len(names) - 1}, did not decode whole')
+    assert said < proc.stderr.index('kobuki_lane: ')  # before the summary
+    whole = cli('--source', path, '--dry-run', '--quiet')
+    assert whole.returncode == 0 and 'truncated' not in whole.stderr
 
 
 def test_a_folder_of_mixed_sizes_and_kinds(tmp_path):
@@ -366,8 +399,13 @@ def test_stages_writes_every_stage_and_a_sheet(tmp_path):
     assert edges.shape == (480, 640) and 0 < masked.sum() < edges.sum()
     sheet = cv2.imread(str(out / '0000_sheet.png'))
     assert sheet.shape[1] == 4 * 320
-    proc = cli('--source', str(frames), '--dry-run', '--stages', str(tmp_path / 'missing'))
-    assert proc.returncode == 2 and 'no such folder' in proc.stderr
+    made = tmp_path / 'made'  # a folder that does not exist yet is made, and its size said
+    proc = cli('--source', str(frames), '--dry-run', '--quiet', '--stages', str(made))
+    assert proc.returncode == 0 and len(os.listdir(made)) == 2 * 9
+    size = sum(os.path.getsize(made / name) for name in os.listdir(made)) / 1e6
+    assert f'--stages: 18 pictures, {size:.1f} MB in {made}' in proc.stderr
+    proc = cli('--source', str(frames), '--dry-run', '--stages', str(tmp_path / 'no' / 'sub'))
+    assert proc.returncode == 2 and 'does not exist' in proc.stderr
 
 
 def test_an_output_never_destroys_an_input_or_another_output(tmp_path):
@@ -443,7 +481,149 @@ def test_every_lecture_setting_is_honoured_or_refused_at_start(name, tmp_path, c
             assert not out.exists(), (flag, value)
 
 
+IMPROVED_AND_SAFETY_NUMBERS = [f.name for table in (ImprovedParams, Safety)
+                               for f in dataclasses.fields(table) if f.name != 'lane']
+SILLY = ('0', '-1', 'nan', 'inf', '1e300', '5000', '99999')
+
+
+@pytest.mark.parametrize('name', IMPROVED_AND_SAFETY_NUMBERS)
+def test_every_improved_and_safety_setting_is_honoured_or_refused_at_start(name, tmp_path,
+                                                                         capsys):
+    """The same for the improved controller's and the safety tables' numbers."""
+    frames = tmp_path / 'frames'
+    frames.mkdir()
+    first = sorted(os.listdir(SAMPLES))[0]
+    shutil.copy(os.path.join(SAMPLES, first), frames / first)
+    flag = '--' + name.replace('_', '-')
+    for k, value in enumerate(SILLY):
+        out = tmp_path / f'{k}.jsonl'
+        try:
+            status = main(['--source', str(frames), '--dry-run', '--quiet', '--controller',
+                           'improved', flag, value, '--decisions', str(out)])
+        except SystemExit as e:
+            status = e.code
+        err = capsys.readouterr().err
+        if status == 0:
+            assert len(read_jsonl(out)) == 1, (flag, value)
+        else:
+            assert status == 2 and (name in err or flag in err), (flag, value, err)
+            assert 'Traceback' not in err and not out.exists(), (flag, value)
+
+
+def test_every_number_of_simulate_py_is_honoured_or_refused_at_start(tmp_path, capsys):
+    """simulate.py's numeric flags through the same values: a run that ends (0 or 1), or
+    exit 2 at start naming the flag; never a traceback or a NaN in the result."""
+    import json
+    import math
+
+    import simulate
+
+    parser = simulate.build_parser()
+    numeric = [a for a in parser._actions if a.option_strings and a.type not in (None, str)
+               and a.option_strings[0] not in ('--gap', '--dashes', '--time-limit', '--jobs')]
+    assert len(numeric) >= 14
+    for action in numeric:
+        flag = action.option_strings[0]
+        for value in SILLY:
+            out = tmp_path / 'r.json'
+            if out.exists():
+                out.unlink()
+            argv = ['--track', 'lecture', '--controller', 'improved', '--time-limit', '2',
+                    '--json', str(out), flag, value]
+            try:
+                status = simulate.main(argv)
+            except SystemExit as e:
+                status = e.code
+            err = capsys.readouterr().err
+            if status in (0, 1):
+                result = json.loads(out.read_text())
+                assert all(math.isfinite(v) for v in result.values()
+                           if isinstance(v, float)), (flag, value, result)
+            else:
+                assert status == 2 and flag in err and 'Traceback' not in err, (flag, value)
+
+
 def test_the_ranges_are_in_the_help():
     text = ' '.join(cli('--help').stdout.split())
     assert 'odd, 1 to 31' in text and 'more than 0, at most 100' in text
     assert '3 to 100' in text  # the rate
+
+
+def test_a_bad_private_parameter_is_named_with_where_it_came_from():
+    """Before: '_rate:=0' said 'rate = 0.0 is out of range' with no word of the parameter,
+    '_threshold:=abc' did not name it, and a typo was ignored without a word."""
+    proc = cli('--source', SAMPLES, '--dry-run', '_rate:=0')
+    assert proc.returncode == 2 and 'rate = 0.0 is out of range' in proc.stderr
+    assert 'from the private ROS parameter ~rate' in proc.stderr
+    assert "'rosparam delete /kobuki_lane/rate' removes it" in proc.stderr
+    assert 'usage:' not in proc.stderr
+    proc = cli('--source', SAMPLES, '--dry-run', '_threshold:=abc')
+    assert proc.returncode == 2 and "threshold = 'abc' is not a number" in proc.stderr
+    assert 'private ROS parameter ~threshold' in proc.stderr
+    proc = cli('--source', SAMPLES, '--dry-run', '--quiet', '_thresold:=8')
+    assert proc.returncode == 0
+    assert 'unknown private parameter ~thresold, ignored (did you mean ~threshold?)' in proc.stderr
+    proc = cli('--source', SAMPLES, '--dry-run', '--threshold', '-3')
+    assert proc.returncode == 2 and 'from --threshold' in proc.stderr
+
+
+def test_a_setting_above_the_kobukis_limits_is_warned_of_and_what_was_sent_recorded(tmp_path):
+    """Before: --v-max 5 recorded linear_x 5.0 while 0.7 was published, without a word."""
+    out = tmp_path / 'd.jsonl'
+    proc = cli('--source', SAMPLES, '--dry-run', '--quiet', '--controller', 'improved',
+               '--v-max', '5', '--decisions', str(out))
+    assert proc.returncode == 0
+    assert "v_max = 5 m/s is above the Kobuki's 0.70 m/s: commands are clipped" in proc.stderr
+    records = read_jsonl(out)
+    assert max(r['linear_x'] for r in records) == pytest.approx(0.7)
+
+
+@pytest.fixture
+def silent_server():
+    """A TCP server that accepts connections and never answers (a camera URL that hangs)."""
+    import socket
+    import threading
+
+    server = socket.socket()
+    server.bind(('127.0.0.1', 0))
+    server.listen(8)
+    held, stop = [], threading.Event()
+
+    def accept():
+        server.settimeout(0.2)
+        while not stop.is_set():
+            try:
+                held.append(server.accept()[0])
+            except OSError:
+                continue
+
+    thread = threading.Thread(target=accept, daemon=True)
+    thread.start()
+    yield f'http://127.0.0.1:{server.getsockname()[1]}/stream.mjpg'
+    stop.set()
+    thread.join()
+    for conn in held:
+        conn.close()
+    server.close()
+
+
+def test_a_url_that_never_answers_says_it_waits_times_out_and_hears_ctrl_c(silent_server):
+    """Before: 30 s of silence, Ctrl-C ignored, then exit 2 with no word of a timeout."""
+    import signal
+    import time
+
+    start = time.monotonic()
+    proc = cli('--source', silent_server, '--dry-run', '--open-timeout', '1')
+    assert proc.returncode == 2 and time.monotonic() - start < 15
+    assert 'waiting up to 1 s for it to answer' in proc.stderr
+    assert 'no stream from it within 1 s' in proc.stderr
+    node = subprocess.Popen([sys.executable, NODE, '--source', silent_server, '--dry-run',
+                             '--open-timeout', '60'], cwd=REPO, stderr=subprocess.PIPE,
+                            text=True)
+    line = node.stderr.readline()  # the word that it waits comes before the wait
+    assert 'waiting up to 60 s' in line
+    asked = time.monotonic()
+    node.send_signal(signal.SIGINT)
+    _, err = node.communicate(timeout=20)
+    assert node.returncode == 130 and time.monotonic() - asked < 5
+    assert 'interrupted while opening' in err and 'Traceback' not in err

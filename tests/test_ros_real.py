@@ -5,6 +5,7 @@ These tests never skip: without ROS they fail, because the stand-in must not dri
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -13,7 +14,14 @@ import time
 import pytest
 from helpers import NODE, REPO, SAMPLES, read_jsonl, wait_until
 
-from tools.roslive import Listener, free_port, process_tree, start_master, stop_master
+from tools.roslive import (
+    CameraDriver,
+    Listener,
+    free_port,
+    process_tree,
+    start_master,
+    stop_master,
+)
 
 
 @pytest.fixture(autouse=True)
@@ -68,6 +76,15 @@ def test_node_publishes_the_rule_at_4hz_and_ends_with_a_stop(roscore, twist_reco
     rate = (len(times) - 1) / (times[-1] - times[0])
     assert 3.6 < rate < 4.4, rate
     assert 'ended: end of input' in proc.stderr
+
+
+def test_quiet_keeps_the_per_frame_lines_out_of_the_log_on_real_ros(roscore, few_frames):
+    loud = run_node(roscore, ['--source', str(few_frames), '--wait-for-base', '0'])
+    quiet = run_node(roscore, ['--source', str(few_frames), '--wait-for-base', '0', '--quiet'])
+    assert loud.returncode == quiet.returncode == 0
+    assert (loud.stdout + loud.stderr).count('-> straight') == 8
+    assert '-> straight' not in quiet.stdout + quiet.stderr
+    assert 'ended: end of input' in quiet.stderr
 
 
 def test_sigint_stops_the_robot_before_exit(roscore, twist_recorder, tmp_path):
@@ -303,3 +320,72 @@ def test_roslaunch_passes_the_lane_profile(roscore, few_frames, tmp_path):
     out = proc.stdout + proc.stderr
     assert 'lane' in out and 'no_such_lane' in out and 'Traceback' not in out
     assert not (tmp_path / 'no_such_lane.jsonl').exists()
+
+
+LECTURE_INFO = dict(width=640, height=480, K=[893.45537548, 0.0, 309.61828309, 0.0,
+                                              866.99738285, 196.40832355, 0.0, 0.0, 1.0],
+                    D=[2.28504143e-01, -7.32838958e+00, -2.43747623e-02, 9.12080996e-03,
+                       3.98425001e+01])
+
+
+@pytest.mark.parametrize('topic', ['/cam/image_raw', '/cam/image_raw/compressed'])
+def test_a_live_image_topic_gives_the_folder_runs_decisions_then_a_silent_one_stops_the_robot(
+        roscore, twist_recorder, tmp_path, topic):
+    """A camera driver publishes sample frames (bgr8 Image, or JPEG CompressedImage), each
+    for 0.75 s at 10 Hz, with its camera_info; the node reads the newest frame each 4 Hz tick
+    and decides on each as the folder dry run does. Then the driver goes silent: a zero Twist
+    at once, and exit 1 after --camera-retry, naming the topic and what is published."""
+    names = sorted(os.listdir(SAMPLES))[::4][:6]
+    paths = [os.path.join(SAMPLES, name) for name in names]
+    folder = tmp_path / 'frames'
+    folder.mkdir()
+    for path in paths:
+        shutil.copy(path, folder)
+    expected = tmp_path / 'folder.jsonl'
+    assert run_node(roscore, ['--source', str(folder), '--dry-run', '--calibration', 'lecture',
+                              '--decisions', str(expected)]).returncode == 0
+    by_name = {r['source']: r['decision'] for r in read_jsonl(expected)}
+    driver = CameraDriver(roscore['env'], tmp_path / 'driver.log', topic, paths,
+                          info=LECTURE_INFO)
+    decisions = tmp_path / 'topic.jsonl'
+    try:
+        node = subprocess.Popen([sys.executable, NODE, '--source', f'ros:{topic}',
+                                 '--calibration', 'topic', '--camera-retry', '2',
+                                 '--decisions', str(decisions), '--wait-for-base', '0'],
+                                env=roscore['env'], cwd=REPO, stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True)
+        wait_until(lambda: driver.said('done'), 60, 'the driver to publish its frames')
+        silent = time.monotonic()
+        out, err = node.communicate(timeout=60)
+        ended = time.monotonic()
+    finally:
+        driver.close()
+    assert node.returncode == 1, err
+    assert f'camera lost: no frame from \'ros:{topic}\': nothing fresh is published on {topic}' \
+        in err and '/cam/camera_info' in err
+    assert 'calibration from the first camera_info beside' in out
+    assert 'fx=893.46' in out  # the intrinsics came from the topic
+    records = read_jsonl(decisions)
+    decided = [r for r in records if 'error' not in r and r['source'] is not None]
+    seen = {int(round(r['source'])) for r in decided}
+    assert seen == set(range(1, len(paths) + 1)), seen  # every frame acted on
+    for r in decided:
+        assert r['decision'] == by_name[names[int(round(r['source'])) - 1]], r
+    assert 2.0 <= ended - silent < 12.0  # the retry time, then the end
+    messages = twist_recorder.wait_for(10 ** 6, timeout=1.0)
+    moving = [t for t, x, z in messages if (x, z) != (0.0, 0.0)]
+    stops = [t for t, x, z in messages if (x, z) == (0.0, 0.0) and t > moving[-1]]
+    assert stops and stops[0] - moving[-1] < 0.7  # a stop within a tick of the last frame
+
+
+def test_a_topic_with_nothing_on_it_is_a_lost_camera_and_a_dry_run_needs_a_master(roscore,
+                                                                                  tmp_path):
+    proc = run_node(roscore, ['--source', 'ros:/nothing/image_raw', '--dry-run',
+                              '--camera-retry', '1', '--calibration', 'none'])
+    assert proc.returncode == 1
+    assert 'nothing fresh is published on /nothing/image_raw; the master has' in proc.stderr
+    env = dict(roscore['env'], ROS_MASTER_URI=f'http://localhost:{free_port()}')
+    proc = subprocess.run([sys.executable, NODE, '--source', 'ros:/cam/image_raw', '--dry-run'],
+                          env=env, cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and 'even a dry run needs a ROS master' in proc.stderr
+    assert 'Traceback' not in proc.stderr

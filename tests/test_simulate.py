@@ -16,11 +16,14 @@ from kobuki_lane import main as node_main
 from lanelib.camera import LECTURE_CAMERA
 from lanelib.geometry import Mounting, camera_axes
 from lanelib.improved import ImprovedParams, LaneEstimate, LaneMemory, measure_lane
-from lanelib.robot import STOP, arc_step
+from lanelib.robot import ODOM_TOPIC, STOP, arc_step
+from lanelib.rospy_standin import Odometry as OdometryMessage
+from lanelib.rospy_standin import SimClock, StandInRospy
 from lanelib.sim.base import BaseLimits, DiffDriveBase
-from lanelib.sim.simulator import improved_params
+from lanelib.sim.simulator import TrackSimulator, improved_params, odometry_message
 from lanelib.sim.tracks import TrackError, from_dict, load_track
 from lanelib.sim.world import FloorCamera, FloorMap, Scene, Track
+from lanelib.topics import Odometry
 
 SHORT = {'lane_width': 0.35, 'tape_width': 0.03,
          'segments': [{'straight': 1.0}, {'arc': {'radius': 1.5, 'angle_deg': 45}},
@@ -263,6 +266,47 @@ def test_the_memory_moves_with_what_was_sent_for_as_long_as_it_took():
                        arc_step(0.0, 0.0, 0.0, first.linear_x, first.angular_z, 0.25), atol=1e-12)
 
 
+def test_the_memory_follows_odometry_not_the_commands_while_it_comes():
+    """Odometry says the robot moved 0.1 m and turned 0.2 rad while the command said 0.3 m/s
+    straight: the memory follows odometry; when odometry stops for more than 0.5 s it
+    dead-reckons on the commands again, and both changes are logged."""
+    ros = StandInRospy(SimClock(), quiet=True)
+    odom = Odometry(ros, ODOM_TOPIC, msg_type=OdometryMessage)
+    pub = ros.Publisher(ODOM_TOPIC, OdometryMessage, queue_size=10)
+    ctl = make_controller('improved', LaneParams(), odometry=odom)
+    frame = straight_lane_frame()
+    pub.publish(odometry_message(1.0, 2.0, 0.5))
+    command = ctl(ctl.perceive(frame), 0.0)
+    assert command.linear_x > 0
+    ros.clock.sleep(0.25)
+    pub.publish(odometry_message(1.0 + 0.1 * math.cos(0.5), 2.0 + 0.1 * math.sin(0.5), 0.7))
+    ctl(ctl.perceive(frame), 0.25)
+    assert np.allclose(ctl.memory.pose, [0.1, 0.0, 0.2], atol=1e-9)  # not 0.25 s of command
+    assert any('the lane memory follows it' in text for _, text in ros.log_lines)
+    sent = ctl.last
+    ros.clock.sleep(0.75)  # odometry silent for 0.75 s: dead reckoning on what was sent
+    ctl(ctl.perceive(frame), 1.0)
+    expected = arc_step(0.1, 0.0, 0.2, *sent, 0.75)
+    assert np.allclose(ctl.memory.pose, expected, atol=1e-9)
+    assert any('no odometry on /odom for 0.5 s' in text for _, text in ros.log_lines)
+
+
+def test_the_simulated_base_publishes_its_odometry_with_slip():
+    spec = from_dict(dict(SHORT), 'short')
+    run = simulate.run(spec, 'improved', odometry=True, time_limit=3,
+                       limits=BaseLimits(slip=0.1))
+    assert run['distance_m'] > 0.3
+    ros = StandInRospy(SimClock(), quiet=True)
+    got = []
+    ros.Subscriber(ODOM_TOPIC, OdometryMessage, got.append)
+    sim = TrackSimulator(spec, ros, odometry=True, limits=BaseLimits(slip=0.1, latency=0.0))
+    sim.base.command(0.0, 0.2, 0.0)
+    ros.clock.sleep(0.5)  # (within the driver's 0.6 s command timeout)
+    sim.read()
+    assert got and got[-1].pose.pose.position.x == pytest.approx(0.1 * 1.1, abs=1e-6)
+    assert sim.base.distance == pytest.approx(0.1, abs=1e-6)
+
+
 def test_lane_memory_holds_the_line_into_a_tight_bend():
     # the camera sees the floor from 0.6 m ahead: without memory the bend's entry is steered
     # on a fit extrapolated from there, with it on the centre line seen earlier
@@ -308,6 +352,11 @@ def test_departure_ends_the_run_unless_told_to_continue():
                                                          'length': 0.2}]}},
      'scene.gaps[0].line must be left, right or both'),
     ({'segments': [{'straight': 1}], 'camera': {'height': 0}}, 'camera.height must be positive'),
+    # issue 16, case 10: accepted before, nonsense after
+    ({'segments': [{'arc': {'radius': 0.15, 'angle_deg': 90}}]},
+     'segments[0].arc.radius 0.15 m is not more than half the lane width'),
+    ({'segments': [{'arc': {'radius': 1, 'angle_deg': 100000}}]}, 'at most 720 either way'),
+    ({'segments': [{'straight': 1}], 'scene': {'floor': 300}}, 'scene.floor is a brightness'),
 ])
 def test_malformed_tracks_name_the_field(doc, field):
     with pytest.raises(TrackError) as e:

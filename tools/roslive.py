@@ -1,5 +1,6 @@
 """Real ROS 1 helpers for the tests and the soak: a roscore that can be killed and restarted,
-and a Twist subscriber in a process of its own that logs what it receives.
+a Twist subscriber in a process of its own that logs what it receives, and a camera driver
+that publishes pictures on an image topic.
 
 Both need Debian's ros-core and python3-rospy (`bash setup.sh test` installs them).
 """
@@ -79,7 +80,7 @@ def process_tree(pid):
 
 
 ROS_PROGRAMS = ('roscore', 'rosmaster', 'rosout', 'roslaunch', 'kobuki_lane.py', "'listener'",
-                'from tools import soak')
+                'from tools import soak', "'camera_driver'")
 
 
 def ros_processes():
@@ -157,6 +158,73 @@ class Listener:
         while time.monotonic() < deadline and len(self.messages()) < count:
             time.sleep(0.1)
         return self.messages()
+
+    def close(self):
+        try:
+            os.killpg(self.proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        self.proc.wait()
+        self.log.close()
+
+
+CAMERA = '''
+import json, sys, time
+import cv2, rospy
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image
+topic, paths, hold, hz, info = json.loads(sys.argv[1])
+rospy.init_node('camera_driver', anonymous=True, disable_signals=True)
+compressed = topic.endswith('/compressed')
+pub = rospy.Publisher(topic, CompressedImage if compressed else Image, queue_size=1)
+base = topic[:-len('/compressed')] if compressed else topic
+info_pub = rospy.Publisher(base.rsplit('/', 1)[0] + '/camera_info', CameraInfo, queue_size=1,
+                           latch=True)
+if info:
+    msg = CameraInfo(width=info['width'], height=info['height'], K=info['K'], D=info['D'],
+                     distortion_model='plumb_bob')
+    msg.header.frame_id = 'test_camera'
+    info_pub.publish(msg)
+while pub.get_num_connections() == 0:  # a driver runs before the node; wait for it here
+    time.sleep(0.05)
+print('connected', flush=True)
+for i, path in enumerate(paths):
+    if compressed:
+        msg = CompressedImage(format='jpeg', data=open(path, 'rb').read())
+    else:
+        frame = cv2.imread(path, cv2.IMREAD_COLOR)
+        msg = Image(height=frame.shape[0], width=frame.shape[1], encoding='bgr8',
+                    step=frame.shape[1] * 3, data=frame.tobytes())
+    msg.header.stamp = rospy.Time(i + 1)
+    end = time.monotonic() + hold
+    while time.monotonic() < end:
+        pub.publish(msg)
+        time.sleep(1.0 / hz)
+print('done', flush=True)
+while True:  # silent now, but still there, as a driver whose camera stopped
+    time.sleep(0.1)
+'''
+
+
+class CameraDriver:
+    """A camera driver in its own process, as usb_cam or astra_camera would be: publishes each
+    of `paths` on `topic` (Image bgr8, or CompressedImage JPEG for a topic ending in
+    /compressed) at `hz` for `hold` seconds, header stamp i + 1 s for the i-th, once the node
+    has subscribed; then goes silent. info: camera_info fields (width, height, K, D) latched
+    beside the topic, or None. Its log says 'connected' and 'done' when it gets there."""
+
+    def __init__(self, env, log, topic, paths, hold=0.75, hz=10.0, info=None):
+        import json
+
+        self.log = open(log, 'w+')
+        args = json.dumps([topic, [str(p) for p in paths], hold, hz, info])
+        self.proc = subprocess.Popen([sys.executable, '-c', CAMERA, args], env=env,
+                                     stdout=self.log, stderr=subprocess.STDOUT,
+                                     start_new_session=True)
+
+    def said(self, word):
+        self.log.flush()
+        with open(self.log.name) as f:
+            return any(line.strip() == word for line in f)
 
     def close(self):
         try:

@@ -1,6 +1,7 @@
 """A Kobuki-like differential-drive base: unicycle kinematics integrated exactly along arcs, the
-Kobuki's speed limits, optional acceleration limits, the time from publish to the wheels, and
-the driver's timeout (no command for 0.6 s and the base stops)."""
+Kobuki's speed limits, optional acceleration limits, the time from publish to the wheels, the
+driver's timeout (no command for 0.6 s and the base stops), and its odometry: the wheels'
+motion integrated, with slip (the wheels turn more than the robot moves) and noise."""
 
 import math
 from dataclasses import dataclass
@@ -18,6 +19,8 @@ class BaseLimits:
     alpha: float = 0.0  # [rad/s^2] angular acceleration limit, 0 for none
     timeout: float = COMMAND_TIMEOUT  # [s] no command for this long and the base stops
     latency: float = 0.05  # [s] from publish to the wheels
+    slip: float = 0.0  # the wheels (and so odometry) turn this fraction more than the robot moves
+    odom_noise: float = 0.0  # [rad/s] sigma of odometry's turn rate error, per 10 ms step
 
 
 def _approach(value, target, rate_limit, dt):
@@ -30,8 +33,10 @@ def _approach(value, target, rate_limit, dt):
 class DiffDriveBase:
     """A differential-drive base integrated exactly along arcs in `dt` steps."""
 
-    def __init__(self, pose, limits=None, dt=0.01, t0=0.0):
+    def __init__(self, pose, limits=None, dt=0.01, t0=0.0, seed=0):
         self.x, self.y, self.yaw = pose
+        self.odometry = (0.0, 0.0, 0.0)  # where the wheels say the base is, from where it began
+        self._rng = np.random.default_rng(seed)
         self.limits = limits or BaseLimits()
         self.dt = dt
         self.t = t0
@@ -63,5 +68,9 @@ class DiffDriveBase:
             self.v = _approach(self.v, v_cmd, lim.accel, dt)
             self.omega = _approach(self.omega, w_cmd, lim.alpha, dt)
             self.x, self.y, self.yaw = arc_step(self.x, self.y, self.yaw, self.v, self.omega, dt)
+            turn = self.omega * (1 + lim.slip)
+            if lim.odom_noise:
+                turn += self._rng.normal(0.0, lim.odom_noise)
+            self.odometry = arc_step(*self.odometry, self.v * (1 + lim.slip), turn, dt)
             self.distance += abs(self.v) * dt
             self.t += dt

@@ -17,6 +17,8 @@ import numpy as np
 from lanelib.camera import CAMERAS
 from lanelib.improved import ImprovedParams
 from lanelib.outputs import VideoSink
+from lanelib.robot import ODOM_TOPIC, VELOCITY_TOPIC
+from lanelib.rospy_standin import Odometry
 from lanelib.sim.base import DiffDriveBase
 from lanelib.sim.world import ColourFloorMap, FloorCamera, FloorMap, Track
 
@@ -50,6 +52,14 @@ def floor_map(spec, track=None, seed=0):
 _COLOUR_FLOORS = {}
 
 
+def odometry_message(x, y, yaw):
+    """The stand-in's nav_msgs/Odometry at pose (x, y, yaw)."""
+    msg = Odometry()
+    msg.pose.pose.position.x, msg.pose.pose.position.y = x, y
+    msg.pose.pose.orientation.z, msg.pose.pose.orientation.w = math.sin(yaw / 2), math.cos(yaw / 2)
+    return msg
+
+
 class TrackSimulator:
     """A frame source that is a robot on a track; it hears the node's Twists via `ros`."""
 
@@ -58,7 +68,7 @@ class TrackSimulator:
     total = None
 
     def __init__(self, spec, ros, seed=0, time_limit=None, keep_going=False, start_offset=0.0,
-                 start_yaw=0.0, limits=None):
+                 start_yaw=0.0, limits=None, odometry=False):
         self.spec, self.ros = spec, ros
         track = spec.track
         # open tracks go on straight beyond the finish so the camera still sees tape there
@@ -66,8 +76,10 @@ class TrackSimulator:
                                                  track.segments + [{'straight': 3.5}])
         self.floor_map = floor_map(spec, shown)
         self.camera = FloorCamera(CAMERAS[spec.camera], spec.mounting)
-        ros.listeners.append(lambda t, topic, msg: self.base.command(t, msg.linear.x,
-                                                                    msg.angular.z))
+        ros.listeners.append(lambda t, topic, msg: topic == VELOCITY_TOPIC and
+                             self.base.command(t, msg.linear.x, msg.angular.z))
+        # the base's odometry on /odom, as kobuki_node publishes it (odometry=True)
+        self.odom = ros.Publisher(ODOM_TOPIC, Odometry, queue_size=10) if odometry else None
         self.rng = np.random.default_rng(seed)
         self.seed = seed
         self.keep_going = keep_going
@@ -79,7 +91,8 @@ class TrackSimulator:
         """Put the robot back at the start at time t0, for a new run on the same track."""
         offset, yaw, limits, time_limit = self._start
         track = self.spec.track
-        self.base = DiffDriveBase(track.pose_at(0.0, offset, yaw), limits, t0=t0)
+        self.base = DiffDriveBase(track.pose_at(0.0, offset, yaw), limits, t0=t0,
+                                  seed=self.seed)
         self.time_limit = t0 + (time_limit or (track.length / 0.04 + 30.0))
         self.history = []  # (t, x, y, s, offset)
         self.departure_points = []
@@ -123,6 +136,8 @@ class TrackSimulator:
         self.ended = self.ended or self._check(t)
         if self.ended:
             return False, None, None
+        if self.odom is not None:
+            self.odom.publish(odometry_message(*self.base.odometry))
         frame = self.camera.render(self.floor_map, self.base.pose, self.spec.scene, self.rng)
         self.frames += 1
         return True, frame, self.frames - 1

@@ -119,8 +119,9 @@ def _segments(value, where):
                 if key not in arc:
                     raise TrackError(f'{here}.arc.{key} is missing')
             angle = _number(arc['angle_deg'], f'{here}.arc.angle_deg')
-            if angle == 0:
-                raise TrackError(f'{here}.arc.angle_deg must not be 0')
+            if angle == 0 or abs(angle) > 720:
+                raise TrackError(f'{here}.arc.angle_deg must not be 0, and at most 720 either '
+                                 f'way (two turns), not {angle:g}')
             out.append({'arc': {'radius': _number(arc['radius'], f'{here}.arc.radius',
                                                   positive=True), 'angle_deg': angle}})
     return out
@@ -142,7 +143,16 @@ def from_dict(doc, name='track'):
     tape = _number(doc.get('tape_width', 0.03), f'{name}.tape_width', positive=True)
     if tape >= lane:
         raise TrackError(f'{name}.tape_width must be smaller than lane_width')
-    track = Track(lane_width=lane, tape_width=tape, segments=_segments(doc['segments'], name))
+    segments = _segments(doc['segments'], name)
+    for i, seg in enumerate(segments):
+        if 'arc' in seg and seg['arc']['radius'] <= lane / 2 + tape:
+            raise TrackError(f"{name}.segments[{i}].arc.radius {seg['arc']['radius']:g} m is "
+                             f'not more than half the lane width and a tape ({lane / 2 + tape:g} '
+                             'm): the inner tape would cross itself')
+    if sum(seg.get('straight', 0.0) + abs(math.radians(seg['arc']['angle_deg'])) *
+           seg['arc']['radius'] if 'arc' in seg else seg['straight'] for seg in segments) > 1000:
+        raise TrackError(f'{name}.segments are more than 1 km long')
+    track = Track(lane_width=lane, tape_width=tape, segments=segments)
     world = _world(doc.get('world', 'lecture'), f'{name}.world')
     cam = dict(_mapping(doc.get('camera', {}), f'{name}.camera',
                         ('model', 'height', 'pitch_deg', 'forward', 'roll_deg')))
@@ -157,6 +167,13 @@ def from_dict(doc, name='track'):
     sc = _mapping(doc.get('scene', {}), f'{name}.scene', scene_keys + ('gaps', 'dashes'))
     scene = Scene(**{k: _number(sc[k], f'{name}.scene.{k}', nonnegative=True)
                      for k in scene_keys if k in sc})
+    for key in ('floor', 'tape', 'wall', 'gradient', 'glare'):
+        if getattr(scene, key) > 255:
+            raise TrackError(f'{name}.scene.{key} is a brightness, 0 to 255, not '
+                             f'{getattr(scene, key):g}')
+    if scene.noise > 100 or not 0.5 <= scene.max_range <= 100:
+        raise TrackError(f'{name}.scene: noise is 0 to 100 grey levels and max_range 0.5 to '
+                         '100 m')
     gaps = []
     for i, gap in enumerate(sc.get('gaps', []) or []):
         here = f'{name}.scene.gaps[{i}]'

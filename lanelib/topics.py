@@ -1,0 +1,201 @@
+"""Live ROS topics the node reads: a camera driver's images and camera_info, and odometry.
+
+    --source ros:/camera/rgb/image_raw             sensor_msgs/Image (TopicSource)
+    --source ros:/usb_cam/image_raw/compressed     sensor_msgs/CompressedImage (a topic ending
+                                                   in /compressed, as image_transport names it)
+    --calibration topic                            the camera_info beside the image topic
+    --odom /odom                                   nav_msgs/Odometry for the lane memory
+
+Each takes the rospy module (real, or the stand-in for odometry in the simulator) and imports
+the message types only when called, so nothing here needs ROS until it is used.
+"""
+
+import math
+import threading
+import time
+
+import numpy as np
+
+from lanelib.imagemsg import ImageMessageError, decode_image
+
+PREFIX = 'ros:'
+BUFFER = 2 ** 26  # [bytes] rospy's receive buffer: a whole 1920x1080 bgr8 frame, and then some
+
+
+def is_topic(spec):
+    return str(spec).startswith(PREFIX)
+
+
+def info_topic(image_topic):
+    """The camera_info beside an image topic: /camera/rgb/image_raw -> /camera/rgb/camera_info,
+    /usb_cam/image_raw/compressed -> /usb_cam/camera_info."""
+    topic = image_topic.rstrip('/')
+    if topic.endswith('/compressed'):
+        topic = topic[:-len('/compressed')]
+    return topic.rsplit('/', 1)[0] + '/camera_info'
+
+
+def published(rospy):
+    """What the master has, for the messages that say a topic is silent."""
+    try:
+        topics = rospy.get_published_topics()
+    except Exception as e:  # the master went away: say so instead
+        return f'(the master could not be asked: {e})'
+    return ', '.join(f'{t} ({m})' for t, m in sorted(topics)) or 'nothing at all'
+
+
+class TopicSource:
+    """The newest frame of an image topic, one per loop tick. The subscription keeps one
+    message (queue_size 1, a receive buffer for a whole frame), so no backlog of stale views
+    builds up; a frame received more than `fresh` seconds ago, or one already used, is not
+    handed out: read() waits up to `wait` seconds for a new one, and otherwise reports the
+    camera lost (the loop then stops the robot and waits for it, see safety.camera_back).
+    Labels are the messages' header stamps [s]."""
+
+    live = True
+    total = None
+
+    def __init__(self, rospy, topic, fresh=0.4, wait=0.4, warn=None):
+        from sensor_msgs.msg import CompressedImage, Image
+
+        self.rospy, self.topic = rospy, topic
+        self.name = PREFIX + topic
+        self.fresh, self.wait = fresh, wait
+        self.compressed = topic.rstrip('/').endswith('/compressed')
+        self.skipped = 0
+        self._warn = warn or rospy.logwarn
+        self._lock = threading.Lock()
+        self._arrived = threading.Event()
+        self._newest = None  # (monotonic time received, message)
+        self._used = None
+        self._sub = rospy.Subscriber(topic, CompressedImage if self.compressed else Image,
+                                     self._received, queue_size=1, buff_size=BUFFER)
+
+    def _received(self, msg):
+        with self._lock:
+            self._newest = (time.monotonic(), msg)
+        self._arrived.set()
+
+    def _take(self):
+        """The newest message if it is fresh and not used yet (then it is used), else None."""
+        with self._lock:
+            item = self._newest
+            if item is None or item is self._used or time.monotonic() - item[0] > self.fresh:
+                self._arrived.clear()
+                return None
+            self._used = item
+            return item[1]
+
+    def read(self):
+        deadline = time.monotonic() + self.wait
+        while True:
+            msg = self._take()
+            if msg is not None:
+                try:
+                    frame = decode_image(msg, self.compressed, f"'{self.topic}'")
+                except ImageMessageError as e:  # one bad message: skipped, said, counted
+                    self.skipped += 1
+                    self._warn('skipped a frame: %s', e)
+                    continue
+                return True, frame, round(msg.header.stamp.to_sec(), 6)
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return False, None, None
+            self._arrived.wait(left)
+
+    def reopen(self):
+        """True once a fresh frame has come (nothing to reopen: the driver publishes or not)."""
+        with self._lock:
+            item = self._newest
+            return (item is not None and item is not self._used and
+                    time.monotonic() - item[0] <= self.fresh)
+
+    def silence(self):
+        """Why there is no frame, for the last word of a run that lost its camera."""
+        return f'nothing fresh is published on {self.topic}; the master has {published(self.rospy)}'
+
+    def release(self):
+        self._sub.unregister()
+
+
+class TopicError(Exception):
+    """A topic that gives nothing usable; the message names it and what is published."""
+
+
+def camera_from_topic(rospy, image_topic, timeout):
+    """A lanelib.camera.Camera from the first camera_info message beside `image_topic`, waited
+    for up to `timeout` seconds; TopicError if none comes or it holds no calibration."""
+    from sensor_msgs.msg import CameraInfo
+
+    from lanelib.camera import Camera
+
+    topic = info_topic(image_topic)
+    try:
+        info = rospy.wait_for_message(topic, CameraInfo, timeout=timeout)
+    except rospy.ROSException:
+        raise TopicError(f'--calibration topic: no sensor_msgs/CameraInfo on {topic} within '
+                         f'{timeout:g} s; the master has {published(rospy)}') from None
+    k = np.array(info.K, float).reshape(3, 3)
+    if k[0, 0] <= 0 or k[1, 1] <= 0 or info.width <= 0 or info.height <= 0:
+        raise TopicError(f'--calibration topic: the camera_info on {topic} holds no calibration '
+                         f'(fx {k[0, 0]:g}, fy {k[1, 1]:g}, {info.width}x{info.height}): '
+                         'calibrate the camera (ROS camera_calibration, or calibration.py '
+                         '--images) and give --calibration FILE')
+    dist = np.array(info.D, float)
+    if dist.size not in (4, 5, 8, 12, 14):
+        dist = np.zeros(5)
+    return Camera(info.header.frame_id or topic, k, dist, (info.width, info.height))
+
+
+class Odometry:
+    """The robot's pose from nav_msgs/Odometry (kobuki_node publishes /odom), for the lane
+    memory: `pose(now)` is the newest (x, y, yaw) if it came less than `timeout` seconds ago,
+    else None (then the memory dead-reckons on the commands). Each change between the two is
+    logged. msg_type: nav_msgs.msg.Odometry by default (the simulator gives the stand-in's)."""
+
+    def __init__(self, rospy, topic='/odom', timeout=0.5, msg_type=None):
+        if msg_type is None:
+            from nav_msgs.msg import Odometry as msg_type
+        self.rospy, self.topic, self.timeout = rospy, topic, timeout
+        self._lock = threading.Lock()
+        self._newest = None  # (ros time received, (x, y, yaw))
+        self.live = None  # None: nothing yet; then True or False, as last logged
+        self._sub = rospy.Subscriber(topic, msg_type, self._received, queue_size=10)
+
+    def _received(self, msg):
+        p, q = msg.pose.pose.position, msg.pose.pose.orientation
+        yaw = math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
+        with self._lock:
+            self._newest = (self.rospy.get_time(), (p.x, p.y, yaw))
+
+    def pose(self, now):
+        with self._lock:
+            item = self._newest
+        live = item is not None and now - item[0] <= self.timeout
+        if live != self.live:
+            if live:
+                self.rospy.loginfo('odometry on %s: the lane memory follows it', self.topic)
+            elif self.live is not None or item is None:
+                self.rospy.logwarn('no odometry on %s for %.1f s: the lane memory dead-reckons '
+                                   'on the commands sent', self.topic, self.timeout)
+            self.live = live
+        return item[1] if live else None
+
+    def release(self):
+        self._sub.unregister()
+
+
+def odometry_from(rospy, topic=None, default='/odom'):
+    """The Odometry for --odom TOPIC (or ~odom, or /odom) when ROS is there; None without ROS
+    or for 'none'."""
+    if rospy is None:
+        return None
+    topic = topic or rospy.get_param('~odom', default)
+    if topic in ('', 'none'):
+        return None
+    try:
+        return Odometry(rospy, topic)
+    except ImportError:
+        rospy.logwarn("no odometry: nav_msgs is not installed (Debian's python3-nav-msgs); the "
+                      'lane memory dead-reckons on the commands')
+        return None
