@@ -540,7 +540,7 @@ def main(argv=None, make_controller=make_controller):
     if not source.live:
         source = Prefetch(source)  # decode the next frames on the second core
     follower = LaneFollower(ros, source, controller, base, outputs, params.rate, not args.quiet)
-    install_signal_handlers(follower.request_stop)
+    install_signal_handlers(follower.request_stop, base, lambda: follower.ended is None)
     lane = getattr(controller, 'profile', None)
     ros.loginfo('kobuki_lane: source %s, %s controller%s, algorithm %s, calibration %s, %.1f Hz '
                 'on %s%s', source.name, controller.name,

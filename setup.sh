@@ -44,7 +44,15 @@ status=0
 # ROS Noetic runs the node on Python 3.8: its tests again there (all but the two that need
 # Debian's ROS), in .venv38 with requirements-py38.txt. KOBUKI_LANE_PY38=required (CI) fails
 # when no Python 3.8 is found; otherwise that is only said.
-py38="$(command -v python3.8 || ls "${PYENV_ROOT:-$HOME/.pyenv}"/versions/3.8*/bin/python3.8 2>/dev/null | tail -1 || true)"
+py38=""  # (a pyenv shim named python3.8 may be on PATH and still not run: each is tried)
+for candidate in "${PYENV_ROOT:-$HOME/.pyenv}"/versions/3.8*/bin/python3.8 \
+                 "$(command -v python3.8 || true)"; do
+  if [ -n "$candidate" ] && [ -x "$candidate" ] &&
+     "$candidate" -c 'import sys; assert sys.version_info[:2] == (3, 8)' 2>/dev/null; then
+    py38="$candidate"
+    break
+  fi
+done
 if [ -z "$py38" ]; then
   echo "setup.sh: no Python 3.8 found (python3.8 or pyenv): the Noetic check is skipped" >&2
   [ "${KOBUKI_LANE_PY38:-}" = required ] && status=1

@@ -16,7 +16,9 @@ is sent before the process exits (install_signal_handlers).
 """
 
 import math
+import os
 import signal
+import sys
 import threading
 import time
 from dataclasses import dataclass
@@ -164,9 +166,15 @@ def camera_back(ros, source, base, since, retry, stopping):
     return False
 
 
-def install_signal_handlers(request_stop):
+def install_signal_handlers(request_stop, base=None, running=None, grace=2.0):
     """SIGINT and SIGTERM ask the loop to end (it then stops the robot); a second signal of the
-    same kind is not ignored."""
+    same kind is not ignored.
+
+    Python runs a signal handler only once the main thread is back from what it is doing, and
+    an OpenCV call can take seconds (an 8000x6000 frame takes 7.5). So with `base` the signal is
+    also heard at once on a thread of its own (signal.set_wakeup_fd): the robot is stopped then
+    and there (base.stop(), the latch), and if the loop is still `running()` `grace` seconds
+    later the process exits (130 for SIGINT, 143 for SIGTERM), saying why."""
     def handler(signum, _frame):
         request_stop(signal.Signals(signum).name)
         signal.signal(signum, signal.SIG_DFL if signum == signal.SIGTERM
@@ -174,3 +182,22 @@ def install_signal_handlers(request_stop):
 
     signal.signal(signal.SIGINT, handler)
     signal.signal(signal.SIGTERM, handler)
+    if base is None:
+        return
+    read, write = os.pipe()
+    os.set_blocking(write, False)
+    signal.set_wakeup_fd(write, warn_on_full_buffer=False)
+
+    def hear():
+        signum = 0
+        while signum not in (signal.SIGINT, signal.SIGTERM):
+            signum = os.read(read, 1)[0]
+        base.stop()  # the robot stops now, whatever the main thread is doing
+        time.sleep(grace)
+        if running is None or running():  # (once the loop has ended, its outputs close)
+            print(f'kobuki_lane: the frame in progress had not ended {grace:g} s after '
+                  f'{signal.Signals(signum).name}; the robot was stopped at once; exiting now',
+                  file=sys.stderr, flush=True)
+            os._exit(128 + signum)
+
+    threading.Thread(target=hear, name='signal-watch', daemon=True).start()

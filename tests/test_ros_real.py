@@ -389,3 +389,31 @@ def test_a_topic_with_nothing_on_it_is_a_lost_camera_and_a_dry_run_needs_a_maste
                           env=env, cwd=REPO, capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2 and 'even a dry run needs a ROS master' in proc.stderr
     assert 'Traceback' not in proc.stderr
+
+
+def test_a_signal_inside_a_slow_opencv_call_stops_the_robot_at_once_and_ends_the_run(
+        roscore, twist_recorder, tmp_path):
+    """Issue 16, case 6: Python hears a signal only when the main thread is back from OpenCV,
+    and an 8000x6000 frame keeps it there for seconds. The stop goes out at once from a thread
+    of its own, and the process ends 2 s later if the frame still has not."""
+    import cv2
+    import numpy as np
+
+    folder = tmp_path / 'huge'
+    folder.mkdir()
+    ramp = np.tile(np.linspace(0, 255, 8000, dtype=np.uint8), (6000, 1))
+    cv2.imwrite(str(folder / 'a.png'), cv2.merge([ramp, ramp, ramp]))
+    node = subprocess.Popen([sys.executable, NODE, '--source', str(folder), '--calibration',
+                             'lecture', '--wait-for-base', '0'], env=roscore['env'], cwd=REPO,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    while 'frames are 8000x6000' not in node.stderr.readline():  # the warning, then the frame
+        assert node.poll() is None
+    time.sleep(0.5)  # inside the frame's OpenCV calls (they take seconds)
+    asked = time.monotonic()
+    node.send_signal(signal.SIGTERM)
+    _, err = node.communicate(timeout=30)
+    ended = time.monotonic() - asked
+    assert node.returncode == 143, err
+    assert ended < 5.0
+    stops = [t for t, x, z in twist_recorder.wait_for(1, timeout=2.0) if (x, z) == (0.0, 0.0)]
+    assert stops and stops[0] - (time.time() - (time.monotonic() - asked)) < 1.0

@@ -534,3 +534,16 @@ def test_soak_counts_commands_inside_fault_intervals():
     forward, turned, after = soak.blind(lost, [[0.0, 10.0]], 1.0, 4.0)
     assert forward == pytest.approx(0.125) and after == 1
     assert turned == pytest.approx(math.degrees(1.5 * 0.25), abs=0.1)
+
+
+def test_the_plots_title_has_a_band_of_its_own_above_the_track():
+    """Issue 16: the stats line of --plot was written over the track."""
+    from lanelib.sim.simulator import TopDown
+
+    ros = StandInRospy(SimClock(), quiet=True)
+    sim = TrackSimulator(from_dict(dict(SHORT), 'short'), ros)
+    top = TopDown(sim)
+    plain, titled = top.draw(), top.draw('first line\nsecond line')
+    assert titled.shape[0] == plain.shape[0] + 2 * 16 + 8
+    assert np.array_equal(titled[40:], plain)  # the track itself is untouched
+    assert titled[:40].max() > 200  # the text is in the band

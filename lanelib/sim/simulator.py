@@ -201,10 +201,13 @@ class TopDown:
         nose = [base.x + 0.15 * math.cos(base.yaw), base.y + 0.15 * math.sin(base.yaw)]
         cv2.arrowedLine(img, tuple(self.px([base.x, base.y])[0, 0]), tuple(self.px(nose)[0, 0]),
                         (255, 255, 255), 2, tipLength=0.4)
-        if title:
-            for i, text in enumerate(title.split('\n')):
-                cv2.putText(img, text, (6, 16 + 16 * i), cv2.FONT_HERSHEY_SIMPLEX, 0.42,
+        if title:  # in a band of its own above the track, never over it
+            lines = title.split('\n')
+            band = np.full((16 * len(lines) + 8, img.shape[1], 3), 20, np.uint8)
+            for i, text in enumerate(lines):
+                cv2.putText(band, text, (6, 16 + 16 * i), cv2.FONT_HERSHEY_SIMPLEX, 0.42,
                             (255, 255, 255), 1, cv2.LINE_AA)
+            img = np.vstack([band, img])
         cv2.putText(img, 'path colour: |offset| 0 (blue) .. half a lane (red); x: departure',
                     (6, img.shape[0] - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.36, (220, 220, 220), 1,
                     cv2.LINE_AA)
