@@ -115,3 +115,15 @@ def test_improved_perception_reads_at_most_max_pieces(frames):
     assert detection.cluttered and len(detection.pieces) == 3
     everything = make_controller('improved', LaneParams()).perceive(frames[0]).pieces
     assert [p.length for p in detection.pieces] == sorted(p.length for p in everything)[:-4:-1]
+
+
+def test_the_benchmarks_literal_dry_run_is_the_nodes_main_with_the_slides_calls(capsys):
+    """tools.bench times kobuki_lane.main() with the literal pipeline swapped in through
+    make_controller; it must keep up with that function's arguments."""
+    from helpers import SAMPLES
+
+    from tools.bench import literal_dry_run
+
+    assert literal_dry_run(['--source', SAMPLES, '--dry-run', '--quiet', '--progress',
+                            'off']) == 0
+    assert 'straight 28' in capsys.readouterr().err

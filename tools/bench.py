@@ -455,7 +455,7 @@ def literal_dry_run(argv):
             return Detection(lines, slope_sum(lines, p.slope_min))
         return pipeline
 
-    def controller(name, params, camera, improved, pipeline):
+    def controller(name, params, camera, improved, pipeline, odometry=None):
         return LectureRule(params, camera, literal(params))
 
     return kobuki_lane.main(argv, make_controller=controller)
