@@ -129,15 +129,30 @@ while True:
 '''
 
 
-class Listener:
-    """A subscriber to the velocity topic in its own process (a process's rospy belongs to one
-    master session); each line of `log` is `receive-time linear.x angular.z`."""
+class LoggedProcess:
+    """A python -c script in a process group of its own writing its output to `log`; close()
+    kills the group. (A process's rospy belongs to one master session.)"""
+
+    def __init__(self, env, log, script, *args, stderr=subprocess.DEVNULL):
+        self.log = open(log, 'w+')
+        self.proc = subprocess.Popen([sys.executable, '-c', script, *args], env=env,
+                                     stdout=self.log, stderr=stderr, start_new_session=True)
+
+    def close(self):
+        try:
+            os.killpg(self.proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        self.proc.wait()
+        self.log.close()
+
+
+class Listener(LoggedProcess):
+    """A subscriber to the velocity topic in its own process; each line of `log` is
+    `receive-time linear.x angular.z`."""
 
     def __init__(self, env, log):
-        self.log = open(log, 'w+')
-        self.proc = subprocess.Popen([sys.executable, '-c', SUBSCRIBER], env=env,
-                                     stdout=self.log, stderr=subprocess.DEVNULL,
-                                     start_new_session=True)
+        super().__init__(env, log, SUBSCRIBER)
 
     def ready(self):
         self.log.flush()
@@ -158,14 +173,6 @@ class Listener:
         while time.monotonic() < deadline and len(self.messages()) < count:
             time.sleep(0.1)
         return self.messages()
-
-    def close(self):
-        try:
-            os.killpg(self.proc.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
-        self.proc.wait()
-        self.log.close()
 
 
 CAMERA = '''
@@ -205,7 +212,7 @@ while True:  # silent now, but still there, as a driver whose camera stopped
 '''
 
 
-class CameraDriver:
+class CameraDriver(LoggedProcess):
     """A camera driver in its own process, as usb_cam or astra_camera would be: publishes each
     of `paths` on `topic` (Image bgr8, or CompressedImage JPEG for a topic ending in
     /compressed) at `hz` for `hold` seconds, header stamp i + 1 s for the i-th, once the node
@@ -215,21 +222,11 @@ class CameraDriver:
     def __init__(self, env, log, topic, paths, hold=0.75, hz=10.0, info=None):
         import json
 
-        self.log = open(log, 'w+')
-        args = json.dumps([topic, [str(p) for p in paths], hold, hz, info])
-        self.proc = subprocess.Popen([sys.executable, '-c', CAMERA, args], env=env,
-                                     stdout=self.log, stderr=subprocess.STDOUT,
-                                     start_new_session=True)
+        super().__init__(env, log, CAMERA,
+                         json.dumps([topic, [str(p) for p in paths], hold, hz, info]),
+                         stderr=subprocess.STDOUT)
 
     def said(self, word):
         self.log.flush()
         with open(self.log.name) as f:
             return any(line.strip() == word for line in f)
-
-    def close(self):
-        try:
-            os.killpg(self.proc.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
-        self.proc.wait()
-        self.log.close()
