@@ -81,7 +81,7 @@ from lanelib.stages import (
     region_of_interest_vertices,
     slope_sum,
 )
-from lanelib.topics import TopicError, camera_from_topic, is_topic, odometry_from
+from lanelib.topics import TopicError, camera_from_topic, odometry_from, topic_of
 
 PROG = 'kobuki_lane.py'
 
@@ -497,7 +497,7 @@ def main(argv=None, make_controller=make_controller):
     parser = build_parser()
     args = parser.parse_args(ours)
     check_arguments(PROG, args)
-    topic = args.source[len('ros:'):] if is_topic(args.source) else None
+    topic = topic_of(args.source)
     try:
         camera = None if args.calibration == 'topic' else load_calibration(args.calibration)
     except CalibrationError as e:
@@ -578,9 +578,6 @@ def finish(ended, follower, source):
     if ended == 'pipeline errors':
         print(f'{PROG}: error: {follower.errors} frames in a row failed in the pipeline (see '
               'the log above)', file=sys.stderr)
-    if ended == 'end of input' and follower.frames == 0:
-        fail(PROG, f"no frame could be read from '{source.name}' (corrupt, truncated or an "
-                   'unsupported format?)')
     read = follower.frames + source.skipped
     short = source.total and read < source.total - 1
     if ended == 'end of input' and (short or getattr(source, 'cut_short', False)):

@@ -10,12 +10,13 @@ Bags written here open in Debian's `rosbag info` and `rosbag.Bag`; the tests che
 """
 
 import os
-import sys
+import struct
 import threading
 import time
 
 import cv2
 
+from lanelib.cli import warning
 from lanelib.imagemsg import ImageMessageError, decode_image
 
 IMAGE_TYPES = ('sensor_msgs/msg/Image', 'sensor_msgs/msg/CompressedImage')
@@ -37,9 +38,6 @@ def _describe(connections):
     return ', '.join(f'{t} ({m})' for t, m in topics) or 'no topics at all'
 
 
-_UNREAD = object()  # BagSource._first before the first frame is read
-
-
 class BagSource:
     """Image messages from a ROS 1 bag as frames; labels are the message stamps' seconds."""
 
@@ -47,7 +45,7 @@ class BagSource:
 
     def __init__(self, path, topic=None, warn=None):
         self.skipped = 0
-        self._warn = warn or (lambda msg: print(f'warning: {msg}', file=sys.stderr))
+        self._warn = warn or warning
         from rosbags.rosbag1 import Reader, ReaderError
 
         self.name = str(path)
@@ -75,8 +73,7 @@ class BagSource:
         self.topic = topic
         self.total = sum(c.msgcount for c in chosen)
         self._messages = self._reader.messages(connections=chosen)
-        self._first = _UNREAD
-        self._first = self._next_frame()  # fails here, not mid-run, on a bad encoding
+        self._first = self._next_frame(first=True)  # fails here, not mid-run, on a bad one
 
     def _decode(self, conn, raw):
         msg = self._store.deserialize_ros1(raw, conn.msgtype)
@@ -86,12 +83,12 @@ class BagSource:
         except ImageMessageError as e:
             raise BagError(str(e)) from None
 
-    def _next_frame(self):
+    def _next_frame(self, first=False):
         for conn, stamp, raw in self._messages:
             try:
                 return True, self._decode(conn, raw), round(stamp * 1e-9, 6)
             except BagError as e:
-                if self._first is _UNREAD:
+                if first:
                     raise  # the first frame: the bag cannot be used as asked, said at start
                 self.skipped += 1  # later ones: skipped, said, counted, as unreadable files
                 self._warn(f'skipped a frame at {stamp * 1e-9:.3f} s: {e}')
@@ -115,8 +112,6 @@ def bag_header(index_pos=0, connections=0, chunks=0):
     4096 bytes, 4104 with the two lengths. rosbags pads the record to 4096 in all, and
     `rosbag reindex`, rewriting the header its own way, then overwrote the first 8 bytes of the
     first chunk: a killed bag could not be mended."""
-    import struct
-
     fields = [(b'op', b'\x03'), (b'index_pos', struct.pack('<Q', index_pos)),
               (b'conn_count', struct.pack('<I', connections)),
               (b'chunk_count', struct.pack('<I', chunks))]
@@ -125,15 +120,13 @@ def bag_header(index_pos=0, connections=0, chunks=0):
             b' ' * (4096 - len(header)))
 
 
-def _write_header(path_or_file, index_pos=0, connections=0, chunks=0):
-    path_or_file.seek(HEADER_AT)
-    path_or_file.write(bag_header(index_pos, connections, chunks))
+def _write_header(f, index_pos=0, connections=0, chunks=0):
+    f.seek(HEADER_AT)
+    f.write(bag_header(index_pos, connections, chunks))
 
 
 def _read_header_counts(f):
     """(index_pos, conn_count, chunk_count) of the header record at HEADER_AT."""
-    import struct
-
     f.seek(HEADER_AT)
     size = struct.unpack('<I', f.read(4))[0]
     data, values, at = f.read(size), {}, 0

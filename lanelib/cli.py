@@ -15,6 +15,11 @@ def fail(prog, message):
     raise SystemExit(2)
 
 
+def warning(message):
+    """A warning on stderr: what a source says when it was given no logger of its own."""
+    print(f'warning: {message}', file=sys.stderr)
+
+
 def check_output(prog, path, what):
     """Refuse an output path whose folder is missing or read-only, before the run starts."""
     problem = output_problem(path)

@@ -214,10 +214,10 @@ def measure_lane(pieces, profile, p, prior=None, anchor=None):
     """One frame's LaneEstimate from pieces of line with their colours (lanefit.find_lane),
     or None when less than a quarter lane width's length of the lane's lines is seen or the
     robot would be more than half a lane outside the lane found; and the lanefit.LaneFit it
-    rests on (or None). prior: the LaneEstimate expected; anchor: (offset, heading) of the
-    lane expected at the robot, if known better than the prior's (lanefit.find_lane)."""
-    guide = prior if prior is None or isinstance(prior, tuple) else prior.arc
-    fit = find_lane(pieces, profile, p.lane_width, guide, width_tolerance=p.width_tolerance,
+    rests on (or None). prior: the arc (e, psi, k) of the lane expected; anchor: (offset,
+    heading) of the lane expected at the robot, if known better than the prior's
+    (lanefit.find_lane)."""
+    fit = find_lane(pieces, profile, p.lane_width, prior, width_tolerance=p.width_tolerance,
                     anchor=anchor)
     if fit is None or fit.left + fit.right < 0.25 * p.lane_width or abs(fit.e) > fit.width:
         # too little line seen, or a lane the robot would be more than half a lane outside:
@@ -287,17 +287,19 @@ class LaneMemory:
 
     def move(self, v, omega, dt):
         """Dead reckoning: `dt` seconds at (v, omega)."""
-        self.pose = np.array(arc_step(*self.pose, v, omega, dt))
-        self.t += dt
-        self.chunks = [c for c in self.chunks if self.t - c[0] <= self.seconds]
-        self._local = None
+        self._moved_to(np.array(arc_step(*self.pose, v, omega, dt)), dt)
 
     def move_by(self, ahead, left, turned, dt):
         """The robot moved `ahead` and `left` [m] and turned `turned` [rad] (in its frame before
-        the move) in `dt` seconds: from odometry, or dead reckoning."""
+        the move) in `dt` seconds: from odometry."""
         px, py, yaw = self.pose
         c, s = math.cos(yaw), math.sin(yaw)
-        self.pose = np.array([px + c * ahead - s * left, py + s * ahead + c * left, yaw + turned])
+        self._moved_to(np.array([px + c * ahead - s * left, py + s * ahead + c * left,
+                                 yaw + turned]), dt)
+
+    def _moved_to(self, pose, dt):
+        """The robot is at `pose` `dt` seconds later: points older than `seconds` are gone."""
+        self.pose = pose
         self.t += dt
         self.chunks = [c for c in self.chunks if self.t - c[0] <= self.seconds]
         self._local = None
@@ -513,10 +515,10 @@ class ImprovedController:
         dt = max(0.0, t - last)
         return self.dt if abs(dt - self.dt) < 1e-6 else dt  # a clock's rounding is no motion
 
-    def regained(self, meas, anchor):
+    def regained(self, meas):
         """Whether a lane found after the robot drove and turned blind is the one it lost: the
         robot has not left its lane (it would have been a departure), so it is inside the lane
-        found, and where the memory puts it (anchor: its offset in the remembered lane)."""
+        found (within three quarters of a lane width of its centre)."""
         return abs(meas.a) <= 0.75 * self.p.lane_width
 
     def moved(self, t):
@@ -543,8 +545,9 @@ class ImprovedController:
         else:
             ds, dtheta = math.copysign(math.hypot(moved[0], moved[1]), moved[0]), moved[2]
         prior = predict(self.estimate, ds, dtheta) if self.estimate else None
-        guide = prior  # the centre line the segments are sorted to left and right against
-        anchor = None  # where the lane is at the robot: the prior's, or the memory's
+        # the arc the segments are sorted to left and right against, and where the lane is at
+        # the robot: the prior's, or the memory's
+        guide, anchor = (prior.arc if prior else None), None
         if self.memory is not None:
             if moved is None:
                 self.memory.move(*self.last, dt)
@@ -552,7 +555,7 @@ class ImprovedController:
                 self.memory.move_by(*moved, dt)
             remembered = self.memory.centre_line(0.2, 1.2, 0.3)
             if remembered is not None and prior is not None:
-                guide = replace(prior, a=remembered[0], b=remembered[1], c=remembered[2])
+                guide = replace(prior, a=remembered[0], b=remembered[1], c=remembered[2]).arc
             under = self.memory.centre_line(-0.2, 0.4, 0.2)  # about the robot: no lever
             if under is not None:
                 anchor = (under[0], math.atan(under[1]))
@@ -564,7 +567,7 @@ class ImprovedController:
         self.mark('lane')
         self.last_sides = None if fit is None else fit.sides
         blind = self.lost_for > p.lost_timeout  # the estimate from before is stale
-        if blind and meas is not None and not self.regained(meas, anchor):
+        if blind and meas is not None and not self.regained(meas):
             meas = None  # another lane (the far leg of a U-turn): keep searching
         if meas is not None:
             self.lost_for, self.search = 0.0, None

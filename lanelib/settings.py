@@ -77,21 +77,24 @@ def _kind(f):
     return {'str': str, 'int': int}.get(name, float)
 
 
-def validate(params):
-    """Raise ValueError naming the first setting that is out of range."""
+def validate(params, origins=None):
+    """Raise ValueError naming the first setting that is out of range, and where its value came
+    from when `origins` ({name: where}) says."""
+    origins = origins or {}
     for f in dataclasses.fields(params):
         value, meta = getattr(params, f.name), f.metadata
+        source = f' (from {origins[f.name]})' if origins.get(f.name) else ''
         if meta['choices'] and value not in meta['choices']:
             raise ValueError(f"{f.name} must be one of {', '.join(meta['choices'])}, "
-                             f'not {value!r}')
+                             f'not {value!r}{source}')
         try:
             ok = not meta['check'] or meta['check'](value)
         except ValueError as e:  # a check that says itself what is wrong
-            raise ValueError(f'{f.name}: {e}') from None
+            raise ValueError(f'{f.name}: {e}{source}') from None
         if not ok:
             within = getattr(meta['check'], 'range', None)
             raise ValueError(f'{f.name} = {value!r} is out of range'
-                             f'{f" ({within})" if within else ""}: {meta["help"]}')
+                             f'{f" ({within})" if within else ""}: {meta["help"]}{source}')
     return params
 
 
@@ -135,13 +138,7 @@ def resolve(table, args, get_param, defaults=None, file=None):
         elif kind is str:
             value = str(value)
         values[f.name] = value
-    try:
-        return validate(table(**values))
-    except ValueError as e:
-        name = str(e).split(' ', 1)[0].rstrip(':')
-        if came.get(name):
-            raise ValueError(f'{e} (from {came[name]})') from None
-        raise
+    return validate(table(**values), came)
 
 
 def unknown(names, tables, others=()):

@@ -15,12 +15,13 @@ index otherwise. Unreadable files in a folder are skipped with a warning and cou
 
 import os
 import queue
-import sys
 import threading
 
 import cv2
 
 from lanelib.camera import aspect_problem
+from lanelib.cli import warning
+from lanelib.topics import topic_of
 
 IMAGE_EXTENSIONS = ('.png', '.jpg', '.jpeg', '.bmp', '.tif', '.tiff', '.webp', '.pgm', '.ppm',
                     '.pnm')
@@ -41,9 +42,10 @@ class CaptureSource:
         self.total = None
         self._arg = capture_arg
         self._timeout = timeout  # [s] for a URL: give up opening or reading after this long
-        if timeout is not None and warn is not None:
-            warn(f"opening '{spec}': waiting up to {timeout:g} s for it to answer "
-                 '(--open-timeout; Ctrl-C gives up)')
+        self._warn = warn or warning
+        if timeout is not None:
+            self._warn(f"opening '{spec}': waiting up to {timeout:g} s for it to answer "
+                       '(--open-timeout; Ctrl-C gives up)')
         self._cap = self._open()
         if not self._cap.isOpened():
             self._cap.release()
@@ -58,7 +60,6 @@ class CaptureSource:
         if not live and count > 0:
             self.total = count
         self._ahead = None
-        self._warn = warn or (lambda msg: print(f'warning: {msg}', file=sys.stderr))
         self.cut_short = not live and riff_cut_short(str(capture_arg))
 
     def _open(self):
@@ -122,7 +123,7 @@ class FolderSource:
         self._files = list(files)
         self.total = len(self._files)
         self._next = 0
-        self._warn = warn or (lambda msg: print(f'warning: {msg}', file=sys.stderr))
+        self._warn = warn or warning
 
     def read(self):
         while self._next < len(self._files):
@@ -293,10 +294,10 @@ def open_source(spec, warn=None, image_topic=None, rospy=None, fresh=0.4, timeou
     for a live image topic (ros:TOPIC), whose frames older than `fresh` seconds are not used;
     timeout [s]: how long a URL may take to answer (KeyboardInterrupt on Ctrl-C meanwhile)."""
     spec = str(spec)
-    if spec.startswith('ros:'):
+    topic = topic_of(spec)
+    if topic is not None:
         from lanelib.topics import TopicSource
 
-        topic = spec[len('ros:'):]
         if rospy is None or not topic.startswith('/'):
             raise SourceError(f"cannot open '{spec}': give a topic name after ros:, e.g. "
                               'ros:/camera/rgb/image_raw, and a ROS master')
@@ -311,8 +312,7 @@ def open_source(spec, warn=None, image_topic=None, rospy=None, fresh=0.4, timeou
     if spec.isdigit():
         return CaptureSource(spec, int(spec), live=True)
     if '://' in spec:
-        return CaptureSource(spec, spec, live=True, timeout=timeout,
-                             warn=warn or (lambda msg: print(f'warning: {msg}', file=sys.stderr)))
+        return CaptureSource(spec, spec, live=True, timeout=timeout, warn=warn)
     if '%' in spec:
         folder = os.path.dirname(spec) or '.'
         if not os.path.isdir(folder):
@@ -352,5 +352,6 @@ def check_first_frame(source, camera, warn):
     if problem:
         source.release()
         raise SourceError(problem)
-    if size_warning(frame):
-        warn('%s', size_warning(frame))
+    said = size_warning(frame)
+    if said:
+        warn('%s', said)

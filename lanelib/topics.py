@@ -22,8 +22,10 @@ PREFIX = 'ros:'
 BUFFER = 2 ** 26  # [bytes] rospy's receive buffer: a whole 1920x1080 bgr8 frame, and then some
 
 
-def is_topic(spec):
-    return str(spec).startswith(PREFIX)
+def topic_of(spec):
+    """The topic a --source names (ros:TOPIC), or None for any other source."""
+    spec = str(spec)
+    return spec[len(PREFIX):] if spec.startswith(PREFIX) else None
 
 
 def info_topic(image_topic):
@@ -76,11 +78,16 @@ class TopicSource:
             self._newest = (time.monotonic(), msg)
         self._arrived.set()
 
+    def _new(self, item):
+        """Whether a (received, message) item is fresh and not used yet."""
+        return (item is not None and item is not self._used and
+                time.monotonic() - item[0] <= self.fresh)
+
     def _take(self):
         """The newest message if it is fresh and not used yet (then it is used), else None."""
         with self._lock:
             item = self._newest
-            if item is None or item is self._used or time.monotonic() - item[0] > self.fresh:
+            if not self._new(item):
                 self._arrived.clear()
                 return None
             self._used = item
@@ -106,9 +113,7 @@ class TopicSource:
     def reopen(self):
         """True once a fresh frame has come (nothing to reopen: the driver publishes or not)."""
         with self._lock:
-            item = self._newest
-            return (item is not None and item is not self._used and
-                    time.monotonic() - item[0] <= self.fresh)
+            return self._new(self._newest)
 
     def silence(self):
         """Why there is no frame, for the last word of a run that lost its camera."""
