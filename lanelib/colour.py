@@ -29,33 +29,44 @@ BOX = 0.2  # [image widths] the surroundings a pixel's brightness is judged agai
 POINTS = 3  # points that stand for a piece when the lane is fitted (Piece.summary)
 
 
-def colour_masks(bgr, roi):
+def colour_masks(bgr, roi, colours=None, surroundings=None):
     """{'white', 'yellow', 'red', 'any'}: uint8 masks (255 = that colour) of a BGR image, with
-    the floor's colour and brightness taken from the pixels where roi is set."""
+    the floor's colour and brightness taken from the pixels where roi is set. colours: only
+    these (and 'red', which 'any' needs and the pictures show); surroundings: floor_boxes(roi),
+    when the caller keeps it for every frame of a size (it depends on the mask alone)."""
+    wanted = {'white', 'yellow', 'red', 'any'} if colours is None else {*colours, 'red'}
     lab = cv2.cvtColor(bgr, cv2.COLOR_BGR2LAB)
     light, a, b = cv2.split(lab)
-    floor = (roi > 0).astype(np.uint8)
-    if not floor.any():
-        floor[:] = 1
-    box = (2 * int(BOX * bgr.shape[1] / 2) + 1,) * 2
+    floor, count = surroundings if surroundings is not None else floor_boxes(roi)
     # the surroundings: the floor around the pixel (not the wall, nor the border that
     # undistortion leaves empty), summed in integers so that a band of rows gives exactly
     # what the whole frame gives
-    around = (_box_sum(light * floor, box).astype(np.float32) /
-              np.maximum(_box_sum(floor, box), 1).astype(np.float32))
+    around = _box_sum(light * floor, floor.shape[1]).astype(np.float32) / count
     local = light.astype(np.float32) - around
     spread = 1.5 * _median(cv2.convertScaleAbs(local), floor) + 1.0
     bright = _median(light, floor)
     contrast = max(20.0, 2.5 * spread)
     a = a.astype(np.int16) - int(_median(a, floor))
     b = b.astype(np.int16) - int(_median(b, floor))
-    red = (a > 25) & (a > np.abs(b))
-    lighter = (local > contrast) & (light > bright + 25) & ~red
-    white = lighter & (a.astype(np.int32) ** 2 + b.astype(np.int32) ** 2 < 625)
-    yellow = (b > 25) & (2 * b > 3 * np.abs(a)) & (light > bright)
-    return {name: mask.view(np.uint8) * np.uint8(255)
-            for name, mask in (('white', white), ('yellow', yellow), ('red', red),
-                               ('any', lighter))}
+    masks = {'red': (a > 25) & (a > np.abs(b))}
+    if wanted & {'white', 'any'}:
+        masks['any'] = (local > contrast) & (light > bright + 25) & ~masks['red']
+    if 'white' in wanted:
+        masks['white'] = masks['any'] & (a.astype(np.int32) ** 2 + b.astype(np.int32) ** 2 < 625)
+    if 'yellow' in wanted:
+        masks['yellow'] = (b > 25) & (2 * b > 3 * np.abs(a)) & (light > bright)
+    return {name: masks[name].view(np.uint8) * np.uint8(255)
+            for name in ('white', 'yellow', 'red', 'any') if name in wanted}
+
+
+def floor_boxes(roi):
+    """(floor, count): the floor as a 0/1 uint8 mask (all of it where roi has none), and how
+    many floor pixels each pixel's surroundings hold (at least 1, float32): what
+    colour_masks divides by, the same for every frame with this mask."""
+    floor = (roi > 0).astype(np.uint8)
+    if not floor.any():
+        floor[:] = 1
+    return floor, np.maximum(_box_sum(floor, floor.shape[1]), 1).astype(np.float32)
 
 
 def _median(image, mask):
@@ -64,8 +75,10 @@ def _median(image, mask):
     return float(np.searchsorted(counts, counts[-1] / 2))
 
 
-def _box_sum(image, box):
-    """Sum of the uint8 image over a box around each pixel (zero outside), as int32."""
+def _box_sum(image, width):
+    """Sum of the uint8 image over a box around each pixel (zero outside), as int32: the box
+    BOX times the image's `width` wide and high, an odd number of pixels."""
+    box = (2 * int(BOX * width / 2) + 1,) * 2
     return cv2.boxFilter(image, cv2.CV_32S, box, normalize=False,
                          borderType=cv2.BORDER_CONSTANT)
 

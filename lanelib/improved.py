@@ -46,7 +46,7 @@ import cv2
 import numpy as np
 
 from lanelib.camera import LECTURE_CAMERA, undistortion_maps
-from lanelib.colour import colour_masks, tape_pieces, view_sides
+from lanelib.colour import colour_masks, floor_boxes, tape_pieces, view_sides
 from lanelib.fast import Layout
 from lanelib.geometry import Mounting, floor_to_pixels, floor_to_row
 from lanelib.lanefit import LaneFit, find_lane, fit_lanes, signed_distance
@@ -487,13 +487,13 @@ class ImprovedController:
                 detection.set_image(None, lambda: lay.undistort(raw))
         floor = roi[first:first + len(band)]
         self.mark('undistort')
-        masks = colour_masks(band, floor)
+        key = (id(roi), first, len(band))  # the same for every frame of a size
+        if self._sides is None or self._sides[0] != key:  # the band's edge and surroundings
+            self._sides = (key, view_sides(floor), floor_boxes(floor))
+        _, side, surroundings = self._sides
+        masks = colour_masks(band, floor, self.profile.colours, surroundings)
         self.mark('colour')
         p, pieces = self.p, []
-        key = (id(roi), first, len(band))  # the band's edge: the same for every frame of a size
-        if self._sides is None or self._sides[0] != key:
-            self._sides = (key, view_sides(floor))
-        side = self._sides[1]
         for colour in self.profile.colours:
             tape = max(line.width for line in (self.profile.left, self.profile.right)
                        if line.colour == colour)
