@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from kobuki_lane import LaneParams, main
-from lanelib.colour import Piece, colour_masks, tape_pieces, view_sides
+from lanelib.colour import Piece, colour_masks, floor_boxes, tape_pieces, view_sides
 from lanelib.geometry import Mounting, floor_to_pixels
 from lanelib.improved import ImprovedController, ImprovedParams
 from lanelib.lanefit import find_lane, signed_distance
@@ -96,6 +96,20 @@ def test_colours_are_found_in_the_light_that_is_there(light, cast):
     assert columns['red'] == set(range(240, 252))
     assert set(range(60, 72)) <= columns['any']  # white is lighter than the floor: a tape
     assert not columns['any'] & set(range(240, 252))  # red tape on grey is not lighter
+
+
+@pytest.mark.parametrize('colours', [['any'], ['white', 'yellow'], ['yellow']])
+def test_only_the_colours_asked_for_are_made_and_they_are_the_same(colours):
+    # the controller asks for its profile's colours and keeps the floor's surroundings per
+    # frame size: the masks it gets are those made in full, to the bit
+    scene = floor_scene(tapes=[(60, 12, WHITE), (150, 12, YELLOW), (240, 12, RED)])
+    roi = np.zeros(scene.shape[:2], np.uint8)
+    roi[40:, 20:300] = 255
+    full = colour_masks(scene, roi)
+    some = colour_masks(scene, roi, colours, floor_boxes(roi))
+    assert set(some) == {*colours, 'red'}
+    for name, mask in some.items():
+        assert np.array_equal(mask, full[name]), name
 
 
 def test_a_floor_brighter_on_one_side_does_not_make_lines():

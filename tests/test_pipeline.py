@@ -9,7 +9,7 @@ from lanelib.camera import LECTURE_CAMERA, undistortion_maps
 from lanelib.fast import FastPipeline
 from lanelib.improved import ImprovedParams
 from lanelib.stages import hough_lines, region_of_interest_vertices
-from tools.bench import cluttered_frame, sample_frames, simulator_frames
+from tools.bench import cluttered_frame, improved_controller, sample_frames, simulator_frames
 
 
 @pytest.fixture(scope='module')
@@ -127,3 +127,14 @@ def test_the_benchmarks_literal_dry_run_is_the_nodes_main_with_the_slides_calls(
     assert literal_dry_run(['--source', SAMPLES, '--dry-run', '--quiet', '--progress',
                             'off']) == 0
     assert 'straight 28' in capsys.readouterr().err
+
+
+def test_the_benchmark_times_the_improved_perception_with_the_lane_profile_asked_for():
+    frame = sample_frames()[0]
+    for lane, colours in (('lecture', {'any', 'red'}), ('duckietown', {'white', 'yellow', 'red'})):
+        stages = []
+        read = improved_controller(stages.append, lane)
+        controller = read(frame)
+        assert controller.profile.name == lane
+        assert set(controller.perceive(frame).masks[0]) == colours
+        assert stages[:4] == ['start', 'undistort', 'colour', 'pieces']

@@ -31,6 +31,7 @@ usage (from the repository root):
     python -m tools.bench                      everything (about 2 minutes on 2 cores)
     python -m tools.bench --quick              fewer frames, no throughput or memory runs
     python -m tools.bench --json out/bench.json
+    python -m tools.bench --quick --lane duckietown   the improved perception with two colours
 
 default values: 300 simulator frames plus the 28 samples, each timed 3 times; a 2,000-frame
 video; a 10,000-frame soak.
@@ -52,7 +53,8 @@ from kobuki_lane import LaneFollower, LaneParams, LectureRule, detect
 from lanelib.camera import LECTURE_CAMERA
 from lanelib.cli import check_output
 from lanelib.fast import FastPipeline, Layout
-from lanelib.improved import ImprovedController
+from lanelib.improved import ImprovedController, ImprovedParams
+from lanelib.lanes import BUILTIN as BUILTIN_LANES
 from lanelib.outputs import Outputs
 from lanelib.rospy_standin import SimClock, StandInRospy, Twist
 from lanelib.safety import SafeBase
@@ -370,11 +372,12 @@ def memory(count):
     return json.loads(out.strip().splitlines()[-1])
 
 
-def improved_controller(mark):
-    """The improved controller (lane profile 'lecture'), its stages timed by `mark`, and a
+def improved_controller(mark, lane='lecture'):
+    """The improved controller (lane profile `lane`), its stages timed by `mark`, and a
     function that reads one frame afresh (the lane searched for in full, as on the first
     frame) and steers."""
-    c = ImprovedController(LaneParams(), camera=LECTURE_CAMERA, mark=mark)
+    c = ImprovedController(LaneParams(), ImprovedParams(lane=lane), camera=LECTURE_CAMERA,
+                           mark=mark)
 
     def read(frame):
         c.reset()
@@ -383,11 +386,12 @@ def improved_controller(mark):
     return read
 
 
-def time_improved(frames, repeats):
-    """The improved controller against the literal code on the same frames, interleaved: per
-    stage and whole frame (perception, the lane's fit and the steering)."""
+def time_improved(frames, repeats, lane='lecture'):
+    """The improved controller (lane profile `lane`) against the literal code on the same
+    frames, interleaved: per stage and whole frame (perception, the lane's fit and the
+    steering)."""
     clocks = dict(literal=StageClock(), improved=StageClock(IMPROVED_STAGES, 'steer'))
-    improved = improved_controller(clocks['improved'].mark)
+    improved = improved_controller(clocks['improved'].mark, lane)
     runs = [lambda f: literal_lecture_pipeline(f, '1.1', clocks['literal'].mark), improved]
     for _ in range(repeats):
         for i, frame in enumerate(frames):
@@ -475,6 +479,9 @@ def build_parser():
     parser.add_argument('--quick', action='store_true',
                         help='60 simulator frames, 1 repeat, no throughput or memory runs')
     parser.add_argument('--json', metavar='FILE', help='write every figure as JSON')
+    parser.add_argument('--lane', default='lecture', choices=sorted(BUILTIN_LANES),
+                        help="the improved controller's lane profile (default: lecture, which "
+                        "looks in one colour mask; duckietown and autorace look in two)")
     return parser
 
 
@@ -512,8 +519,9 @@ def main(argv=None):
     report['latency'] = latency(frames)
     print(f"\nframe read -> Twist published: median {report['latency']['median_ms']} ms, "
           f"p95 {report['latency']['p95_ms']} ms")
-    report['improved'] = imp = time_improved(frames, args.repeats)
-    print(f'\nimproved controller (lane profile lecture, each frame read afresh) against the '
+    report['improved'] = imp = time_improved(frames, args.repeats, args.lane)
+    imp['lane'] = args.lane
+    print(f'\nimproved controller (lane profile {args.lane}, each frame read afresh) against the '
           f'literal code, interleaved, {len(frames)} frames x {args.repeats}:')
     print('| stage | median / p95 ms |\n|---|---|')
     for stage, t in imp['improved'].items():
