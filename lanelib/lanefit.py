@@ -10,10 +10,12 @@ to it, straight and bending (and the lane predicted from earlier frames, when th
 seed is fitted to the pieces that lie on its two lines (Gauss-Newton on their distances from
 the arc, within a tolerance that starts at half a lane width and tightens to a quarter), and the
 lane kept is the one whose two lines are best supported: sqrt(left) + sqrt(right) of the line
-lengths they explain, discounted with distance ahead (far points are less certain) and for a
-robot outside the lane it names. So a neighbouring lane's lines, a centre line the robot is
-crossing, a line of the wrong colour on a side, are not its lane's, and one line alone still
-places the lane, half a lane width beside it.
+lengths they explain, discounted with distance ahead (far points are less certain), for a
+robot outside the lane it names, and, with a lane expected, for lying away from where it was
+expected at the robot (one line alone fits a lane on either side of it equally well). So a
+neighbouring lane's lines, a centre line the robot is crossing, a line of the wrong colour on
+a side, are not its lane's, and one line alone still places the lane, half a lane width beside
+it, on the side it was.
 """
 
 import math
@@ -185,7 +187,7 @@ def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tole
         target[:2] = anchor
     priors = (weights, target)
     limits = (lane_width * (1 - width_tolerance), lane_width * (1 + width_tolerance))
-    search = (points, allowed, lane_width, priors, limits, _regions(pieces))
+    search = (points, allowed, lane_width, priors, limits, _regions(pieces), anchor)
     if prior is not None:
         found = _fit_seeds(np.array([[*prior, lane_width]], float), *search)
         if found is not None:
@@ -202,7 +204,7 @@ def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tole
     return None if found is None else _lane(pieces, found)
 
 
-def _fit_seeds(seeds, points, allowed, lane_width, priors, limits, regions=None):
+def _fit_seeds(seeds, points, allowed, lane_width, priors, limits, regions=None, anchor=None):
     """(score, lane, sides, support) of the best lane grown from the seeds (S, 4: e, psi, k,
     width), or None."""
     x, y, w = points
@@ -226,6 +228,12 @@ def _fit_seeds(seeds, points, allowed, lane_width, priors, limits, regions=None)
     inside = (np.repeat(middle & (sides == 0), POINTS, axis=1) * w).sum(axis=1)
     outside = np.maximum(0.0, np.abs(lanes[:, 0]) - half)  # the robot outside the lane it names
     score = (np.sqrt(left) + np.sqrt(right) - np.sqrt(inside)) * np.exp(-outside / half)
+    if anchor is not None:
+        # with one line in view, a lane with it on the left and one with it on the right are
+        # equally supported, a lane width apart at the robot: the one where the robot was
+        # expected to be is the robot's (a tape bending across the view, taken for the other
+        # line from one frame to the next, flipped the estimate by a lane width)
+        score = score * np.exp(-0.5 * ((lanes[:, 0] - anchor[0]) / half) ** 2)
     score[~sides.any(axis=1)] = -1.0
     best = int(np.argmax(score))
     if score[best] <= 0:

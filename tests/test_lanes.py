@@ -318,3 +318,18 @@ def test_an_expected_lane_steadies_the_offset_a_far_bend_cannot_fix():
     assert abs(anchored.e) < 0.01 and abs(anchored.psi) < math.radians(2)
     assert anchored.k == pytest.approx(1.5, rel=0.15)
     assert abs(free.e) + abs(free.psi) > abs(anchored.e) + abs(anchored.psi)
+
+
+@pytest.mark.parametrize('expected', [-0.12, 0.12])
+def test_one_line_of_either_side_is_given_to_the_side_the_lane_was_expected(expected):
+    # a tape of any colour straight under the robot, the only line in view: the lane either
+    # has it as its left line (centre half a width right) or as its right line (half a width
+    # left), equally supported, the robot inside both; where the lane was expected to be at
+    # the robot decides (without it, the choice went one way whatever was expected, and a
+    # tape bending across the view flipped the estimate by a lane width between frames)
+    lecture = BUILTIN['lecture']
+    half = lecture.lane_width / 2
+    pieces = line_pieces(0.0, 'any', along=(0.3, 1.0))
+    fit = find_lane(pieces, lecture, lecture.lane_width, anchor=(expected, 0.0))
+    assert fit.e == pytest.approx(math.copysign(half, expected), abs=0.04)  # (pulled a little)
+    assert set(fit.sides) == {-1 if expected > 0 else 1}
