@@ -191,8 +191,11 @@ def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tole
     if prior is not None:
         found = _fit_seeds(np.array([[*prior, lane_width]], float), *search)
         if found is not None:
-            _, lane, _, support = found
-            if abs(lane[0]) <= lane[3] / 2 and support >= explained * total:
+            # only with both its lines in view: one line alone fits a lane on either side of
+            # it, and which one is the search's to say (the score, with the anchor)
+            _, lane, sides, support = found
+            if (1 in sides and -1 in sides and abs(lane[0]) <= lane[3] / 2 and
+                    support >= explained * total):
                 return _lane(pieces, found)
     seeds = [] if prior is None else [(*prior, lane_width)]
     for piece, (may_left, may_right) in zip(pieces, allowed):

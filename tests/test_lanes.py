@@ -333,3 +333,17 @@ def test_one_line_of_either_side_is_given_to_the_side_the_lane_was_expected(expe
     fit = find_lane(pieces, lecture, lecture.lane_width, anchor=(expected, 0.0))
     assert fit.e == pytest.approx(math.copysign(half, expected), abs=0.04)  # (pulled a little)
     assert set(fit.sides) == {-1 if expected > 0 else 1}
+
+
+def test_one_line_is_not_given_a_side_by_the_refitted_prior_alone():
+    # the lane predicted from earlier frames lies so that the one line in view is nearer its
+    # left line (its bend underestimated: the outer tape of a bend sweeps across the view),
+    # while the lane at the robot is known to be left of that line: the refitted prediction
+    # explains all the line in view either way, so it does not end the search; the search,
+    # with where the lane was expected at the robot, gives the line to the right
+    lecture = BUILTIN['lecture']
+    half = lecture.lane_width / 2
+    pieces = line_pieces(0.0, 'any', along=(0.5, 1.0))
+    fit = find_lane(pieces, lecture, lecture.lane_width, prior=(-0.15, 0.0, 0.0),
+                    anchor=(0.12, 0.0))
+    assert fit.e == pytest.approx(half, abs=0.04) and set(fit.sides) == {-1}
