@@ -615,9 +615,11 @@ class ImprovedController:
 
     def search_direction(self):
         """+1 (left) or -1: where the lane was last seen going, from the remembered lane's
-        bend, or the estimate's centre line at the look-ahead."""
+        bend when the memory reaches half a metre ahead (the bend of a shorter stretch is a
+        guess: on wood's hairpin, 0.25 m of it bent right in a left U-turn), or the
+        estimate's centre line at the look-ahead."""
         found = remembered_arc(self.memory, self.estimate.arc) if self.memory else None
-        if found is not None and abs(found[0][2]) > 0.2:
+        if found is not None and abs(found[0][2]) > 0.2 and np.max(found[1][0]) >= 0.5:
             return math.copysign(1.0, found[0][2])
         return 1.0 if self.estimate.lateral_at(self.p.lookahead) >= 0 else -1.0
 

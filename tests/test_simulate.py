@@ -186,6 +186,19 @@ def test_the_search_turns_towards_a_right_bend_and_ends_when_the_lane_is_back():
     assert back.decision != 'search' and back.linear_x > 0
 
 
+@pytest.mark.parametrize('ahead, expected', [(0.3, 1.0), (0.9, -1.0)])
+def test_the_search_trusts_the_remembered_bend_only_over_half_a_metre(ahead, expected):
+    # the estimate's lane bends left; the memory holds a centre line bending right (radius
+    # 1 m) from behind the robot to `ahead` metres ahead: over 0.3 m its bend is a guess (on
+    # wood's hairpin a short remembered stretch bent right in a left U-turn, and the search
+    # turned away from the lane); over 0.9 m it is where the lane was seen going
+    ctl = make_controller('improved', LaneParams())
+    ctl.estimate = LaneEstimate(0.0, 0.0, 0.4, 0.5)  # curvature 0.8 / m, left
+    x = np.linspace(-0.2, ahead, 60)
+    ctl.memory.add(x, -x ** 2 / 2, np.ones_like(x))
+    assert ctl.search_direction() == expected
+
+
 @pytest.mark.parametrize('track', ['s_tight', 'hairpin'])
 def test_bends_the_lens_loses_the_lane_on_are_completed_never_searching_forward(track):
     """The lecture's level webcam on an S-bend whose 0.7 m bend follows at once and on a 0.5 m
