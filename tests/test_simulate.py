@@ -186,17 +186,16 @@ def test_the_search_turns_towards_a_right_bend_and_ends_when_the_lane_is_back():
     assert back.decision != 'search' and back.linear_x > 0
 
 
-@pytest.mark.parametrize('ahead, expected', [(0.3, 1.0), (0.9, -1.0)])
-def test_the_search_trusts_the_remembered_bend_only_over_half_a_metre(ahead, expected):
+@pytest.mark.parametrize('ahead', [0.3, 0.9])
+def test_the_search_turns_the_way_the_estimate_bends_not_the_remembered_arc(ahead):
     # the estimate's lane bends left; the memory holds a centre line bending right (radius
-    # 1 m) from behind the robot to `ahead` metres ahead: over 0.3 m its bend is a guess (on
-    # wood's hairpin a short remembered stretch bent right in a left U-turn, and the search
-    # turned away from the lane); over 0.9 m it is where the lane was seen going
+    # 1 m) from behind the robot to `ahead` metres ahead, as an arc fitted to the memory of a
+    # U-turn did on wood's hairpin, where the search turned away from the lane and departed
     ctl = make_controller('improved', LaneParams())
     ctl.estimate = LaneEstimate(0.0, 0.0, 0.4, 0.5)  # curvature 0.8 / m, left
     x = np.linspace(-0.2, ahead, 60)
     ctl.memory.add(x, -x ** 2 / 2, np.ones_like(x))
-    assert ctl.search_direction() == expected
+    assert ctl.search_direction() == 1.0
 
 
 @pytest.mark.parametrize('track', ['s_tight', 'hairpin'])
