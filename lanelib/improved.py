@@ -432,7 +432,7 @@ class ImprovedController:
         self._roi = {}  # mask per (camera, width, height)
         self.lane_params = lane_params
         self._layout = None  # the floor band's undistortion, the fast pipeline's way
-        self._sides = None  # (band key, view_sides of the floor band)
+        self._band = None  # (band key, view_sides and floor_boxes of the floor band)
         # the estimate, the time since the lane was last seen [s], the last command (v, omega)
         # and the lane memory
         self.reset()
@@ -488,9 +488,9 @@ class ImprovedController:
         floor = roi[first:first + len(band)]
         self.mark('undistort')
         key = (id(roi), first, len(band))  # the same for every frame of a size
-        if self._sides is None or self._sides[0] != key:  # the band's edge and surroundings
-            self._sides = (key, view_sides(floor), floor_boxes(floor))
-        _, side, surroundings = self._sides
+        if self._band is None or self._band[0] != key:  # the band's edge and surroundings
+            self._band = (key, view_sides(floor), floor_boxes(floor))
+        _, side, surroundings = self._band
         masks = colour_masks(band, floor, self.profile.colours, surroundings)
         self.mark('colour')
         p, pieces = self.p, []
