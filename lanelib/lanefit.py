@@ -102,17 +102,20 @@ class LaneFit:
         self.sides, self.left, self.right, self.centre = sides, left, right, centre
 
     def point_at(self, distance):
-        """(x, y, heading) of the centre line at `distance` [m] from the robot, along it."""
-        s = np.linspace(0.0, 3.0 * distance + 1e-6, 400)
+        """(x, y, heading) of the centre line at `distance` [m] from the robot, along it; on
+        a circle too small to reach that far, its point furthest from the robot (half way
+        round: the way the lane goes; going on round would come back beside the robot)."""
         psi, k = self.psi, self.k
+        s = np.linspace(0.0, min(3.0 * distance, 2 * math.pi / max(abs(k), 1e-9)) + 1e-6, 400)
         if abs(k) < 1e-4:
             x, y, h = s * math.cos(psi), self.e + s * math.sin(psi), np.full_like(s, psi)
         else:
             h = psi + k * s
             x = (np.sin(h) - math.sin(psi)) / k
             y = self.e + (math.cos(psi) - np.cos(h)) / k
-        far = np.hypot(x, y) >= distance
-        i = int(np.argmax(far)) if far.any() else len(s) - 1
+        reach = np.hypot(x, y)
+        far = reach >= distance
+        i = int(np.argmax(far)) if far.any() else int(np.argmax(reach))
         return float(x[i]), float(y[i]), float(h[i])
 
 
