@@ -562,7 +562,10 @@ class ImprovedController:
             if prior is not None and self.lost_for > p.lost_timeout:
                 found = remembered_arc(self.memory, prior.arc)  # any bend, even a U-turn
                 if found is not None:
-                    guide, anchor = found[0], found[0][:2]
+                    # lines are sorted against the remembered arc, but the lane at the robot
+                    # is the estimate's, moved with the robot: an arc fitted to the memory of
+                    # a bend's entry (straight, then bending) is turned the wrong way there
+                    guide, anchor = found[0], prior.arc[:2]
         meas, fit = measure_lane(detection.pieces, self.profile, p, guide, anchor)
         self.mark('lane')
         self.last_sides = None if fit is None else fit.sides
