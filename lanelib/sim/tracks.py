@@ -49,11 +49,14 @@ LANE_TRACKS = {
 }
 # Bends the lecture's lens loses the lane on: the improved controller follows the lane it
 # remembers and then searches (lanelib/improved.py). s_tight: the second bend, radius 0.7 m,
-# follows the first at once, and at the inflection the lane leaves the view; hairpin: a U-turn
-# of radius 0.5 m, where from the centre line no tape is in view at all.
+# follows the first at once, and at the inflection the lane leaves the view; corner: a 0.5 m
+# bend of 90 degrees; hairpin: a U-turn of radius 0.5 m, where from the centre line no tape is
+# in view at all.
 SEARCH_TRACKS = {
     's_tight': dict(segments=[{'straight': 1.0}, {'arc': {'radius': 1.0, 'angle_deg': 120}},
                               {'arc': {'radius': 0.7, 'angle_deg': -120}}, {'straight': 1.0}]),
+    'corner': dict(segments=[{'straight': 1.0}, {'arc': {'radius': 0.5, 'angle_deg': 90}},
+                             {'straight': 1.5}]),
     'hairpin': dict(segments=[{'straight': 1.0}, {'arc': {'radius': 0.5, 'angle_deg': 180}},
                               {'straight': 1.0}]),
 }
