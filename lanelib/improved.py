@@ -24,8 +24,12 @@ estimate, extrapolated, can be a lane off at a gap or an S-bend), the points abo
 give the offset and heading each new fit is pulled towards (lanefit.find_lane's anchor: the
 lines seen far ahead fix them only through a long lever), and steering looks at the
 remembered centre line `memory_lookahead` ahead instead of the latest fit. With too little
-remembered there (the first frames) it steers on the latest estimate as below. The robot still
-stops after `lost_timeout` without a lane in view, memory or not.
+remembered there (the first frames) it steers on the latest estimate as below. After
+`lost_timeout` without a lane in view it follows the remembered lane while that lasts, then
+turns in place towards where the lane went (`search_angle`), then stops (ImprovedController.
+command); a lane found after that is pulled towards the estimate moved with the robot, not
+towards the memory's points (an arc fitted to the memory of a bend's entry is turned the wrong
+way under the robot).
 
 Steering looks at the fitted centre line a distance L ahead, where the segments are (a short
 piece of one line seen on a bend is not extrapolated back to the robot): its lateral position
