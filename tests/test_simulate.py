@@ -20,8 +20,7 @@ from lanelib.robot import ODOM_TOPIC, STOP, arc_step
 from lanelib.rospy_standin import Odometry as OdometryMessage
 from lanelib.rospy_standin import SimClock, StandInRospy
 from lanelib.sim.base import BaseLimits, DiffDriveBase
-from lanelib.sim.simulator import (TrackSimulator, apply_variant, improved_params,
-                                   odometry_message)
+from lanelib.sim.simulator import TrackSimulator, apply_variant, improved_params, odometry_message
 from lanelib.sim.tracks import TrackError, from_dict, load_track
 from lanelib.sim.world import FloorCamera, FloorMap, Scene, Track
 from lanelib.topics import Odometry
