@@ -624,8 +624,8 @@ class ImprovedController:
         """+1 (left) or -1: where the lane was last seen going, the way the estimate's centre
         line lies at the look-ahead. (The remembered lane's bend was used first: an arc fitted
         to the memory of a U-turn bent the other way on wood's hairpin, and the search turned
-        away from the lane and departed, seed 1; with the estimate every hairpin and s_tight
-        row of seeds 0 and 1 turned the right way.)"""
+        away from the lane and departed, seed 1. On a bend too tight to reach the look-ahead
+        the point is the one half way round it: LaneFit.point_at.)"""
         return 1.0 if self.estimate.lateral_at(self.p.lookahead) >= 0 else -1.0
 
     def sent(self, command):
