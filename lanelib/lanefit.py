@@ -12,7 +12,8 @@ the arc, within a tolerance that starts at half a lane width and tightens to a q
 lane kept is the one whose two lines are best supported: sqrt(left) + sqrt(right) of the line
 lengths they explain, discounted with distance ahead (far points are less certain), for a
 robot outside the lane it names, and, with a lane expected, for lying away from where it was
-expected at the robot (one line alone fits a lane on either side of it equally well). So a
+expected at the robot (one line alone fits a lane on either side of it equally well); a piece
+running across the fitted lane's lines where it lies (over ASKEW) is on neither. So a
 neighbouring lane's lines, a centre line the robot is crossing, a line of the wrong colour on
 a side, are not its lane's, and one line alone still places the lane, half a lane width beside
 it, on the side it was.
@@ -28,6 +29,7 @@ TOLERANCES = (0.5, 0.35, 0.25, 0.25)  # [lane widths] for the fitting rounds
 SEED_CURVATURES = (0.0, -0.5, 0.5, -1.0, 1.0, -2.0, 2.0)  # [1 / lane width]
 ITERATIONS = 4  # Gauss-Newton steps per fitting round
 PRIOR_PULL = 0.03  # [of the line in view] pull towards the expected offset and heading
+ASKEW = math.radians(30)  # a piece turned more than this from its line is not on it
 
 
 def signed_distance(x, y, e, psi, k):
@@ -127,18 +129,41 @@ def _points(pieces, reach):
     return x, y, w
 
 
-def _sides(distance, allowed, half, tol, regions=None):
+def _askew(lanes, pieces):
+    """(S, pieces): whether each piece runs more than ASKEW across the lane's lines where it
+    lies (lanes (S, 4) e, psi, k, width; the lines' direction at a point is the centre arc's
+    at the point abreast of it). A bend's outer tape seen again beyond a gap has turned across
+    the view and lies a lane width over, where the other line would be, but not along it:
+    taken for that line, it made a straight lane of a 0.5 m bend (wood's corner). Only the
+    lanes fitted are judged so: in the fitting rounds a lane not yet bent would turn away the
+    pieces of its own bend."""
+    x = np.array([p.summary[0].mean() for p in pieces])
+    y = np.array([p.summary[1].mean() for p in pieces])
+    phi = np.array([p.phi for p in pieces])
+    e, psi, k = (lanes[:, i:i + 1] for i in range(3))
+    s, c = np.sin(psi), np.cos(psi)
+    u, v = x * c + (y - e) * s, (y - e) * c - x * s  # in the arc's frame
+    heading = psi + np.arctan2(k * u, 1 - k * v)  # round the circle's centre (k 0: psi)
+    turn = (phi - heading + math.pi / 2) % math.pi - math.pi / 2  # a piece has no direction
+    return np.abs(turn) > ASKEW
+
+
+def _sides(distance, allowed, half, tol, regions=None, askew=None):
     """(S, pieces) each piece's side in each lane: the allowed side (allowed: (pieces, 2)
     left, right) whose line, half (S,) from the centre, its points lie nearest on average,
-    within tol; 0 for neither. regions: (weights (pieces,), one-hot (pieces, R)) of the mask
-    regions the pieces were cut from: one region is one tape, so one line; where a lane puts
-    pieces of one region on both its lines (a tape bending across the view, partly lost in a
-    shadow, taken for both), the pieces on the side with less of it are not the lane's."""
+    within tol; 0 for neither, and 0 where `askew` (S, pieces) says the piece runs across
+    the lines rather than along them (_askew). regions: (weights (pieces,), one-hot
+    (pieces, R)) of the mask regions the pieces were cut from: one region is one tape, so one
+    line; where a lane puts pieces of one region on both its lines (a tape bending across the
+    view, partly lost in a shadow, taken for both), the pieces on the side with less of it
+    are not the lane's."""
     d = distance.reshape(len(distance), len(allowed), POINTS).mean(axis=2)
     half = half[:, None]
     left = np.where(allowed[:, 0], np.abs(d - half), np.inf)
     right = np.where(allowed[:, 1], np.abs(d + half), np.inf)
     sides = np.where((left <= right) & (left < tol), 1, np.where(right < tol, -1, 0))
+    if askew is not None:
+        sides = np.where(askew, 0, sides)
     if regions is not None:
         weight, onehot = regions
         on_left = ((sides == 1) * weight) @ onehot  # (S, R)
@@ -190,7 +215,7 @@ def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tole
         target[:2] = anchor
     priors = (weights, target)
     limits = (lane_width * (1 - width_tolerance), lane_width * (1 + width_tolerance))
-    search = (points, allowed, lane_width, priors, limits, _regions(pieces), anchor)
+    search = (pieces, points, allowed, lane_width, priors, limits, _regions(pieces), anchor)
     if prior is not None:
         found = _fit_seeds(np.array([[*prior, lane_width]], float), *search)
         if found is not None:
@@ -210,7 +235,8 @@ def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tole
     return None if found is None else _lane(pieces, found)
 
 
-def _fit_seeds(seeds, points, allowed, lane_width, priors, limits, regions=None, anchor=None):
+def _fit_seeds(seeds, pieces, points, allowed, lane_width, priors, limits, regions=None,
+               anchor=None):
     """(score, lane, sides, support) of the best lane grown from the seeds (S, 4: e, psi, k,
     width), or None."""
     x, y, w = points
@@ -225,7 +251,8 @@ def _fit_seeds(seeds, points, allowed, lane_width, priors, limits, regions=None,
         lanes = lanes[np.sort(np.unique(grid, axis=0, return_index=True)[1])]
     distance = _distances(x, y, lanes)[0]
     half = lanes[:, 3] / 2
-    sides = _sides(distance, allowed, half, TOLERANCES[-1] * lane_width, regions)
+    sides = _sides(distance, allowed, half, TOLERANCES[-1] * lane_width, regions,
+                   _askew(lanes, pieces))
     on = np.repeat(sides, POINTS, axis=1)
     left, right = ((on == 1) * w).sum(axis=1), ((on == -1) * w).sum(axis=1)
     # line in the middle half of the lane, where only floor should be

@@ -347,3 +347,36 @@ def test_one_line_is_not_given_a_side_by_the_refitted_prior_alone():
     fit = find_lane(pieces, lecture, lecture.lane_width, prior=(-0.15, 0.0, 0.0),
                     anchor=(0.12, 0.0))
     assert fit.e == pytest.approx(half, abs=0.04) and set(fit.sides) == {-1}
+
+
+def bending_line_pieces(y0, start, radius, along, step=0.08):
+    """Pieces of a line at lateral y0, straight to x = start, then bending left round a centre
+    line of `radius` [m]; `along`: the stretch of the line in view (metres along it)."""
+    r = radius - y0  # the line's own radius
+    pieces = []
+    for s0 in np.arange(along[0], along[1] - 1e-9, step):
+        s = np.linspace(s0, s0 + step, 20)
+        turned = np.maximum(s - start, 0.0) / r
+        x = np.where(s < start, s, start + r * np.sin(turned))
+        y = np.where(s < start, y0, y0 + r * (1 - np.cos(turned)))
+        pieces.append(Piece(x, y, math.atan2(y[-1] - y[0], x[-1] - x[0]), 'any',
+                            float(np.hypot(np.diff(x), np.diff(y)).sum()), 0.03))
+    return pieces
+
+
+def test_a_line_bent_across_the_view_beyond_a_gap_is_not_the_other_line():
+    # wood's 0.5 m corner with a gap in its outer tape: the right line is seen before the gap
+    # and again beyond it, where it has turned 60 to 80 degrees and lies a lane width to the
+    # left, where the left line would be (the inner tape is out of view). Given to the left,
+    # it made a straight lane of the two, and the robot drove out of the bend. It runs across
+    # the lines there, not along them: it is not the lane's
+    lecture = BUILTIN['lecture']
+    half = lecture.lane_width / 2
+    near = bending_line_pieces(-half, 0.35, 0.5, (0.45, 0.75))
+    beyond = bending_line_pieces(-half, 0.35, 0.5, (1.12, 1.36))
+    assert min(math.degrees(p.phi) for p in beyond) > 65
+    assert min(p.y.mean() for p in beyond) > half  # where a left line would be
+    fit = find_lane(near + beyond, lecture, lecture.lane_width, anchor=(0.0, 0.0))
+    assert list(fit.sides[:len(near)]) == [-1] * len(near)
+    assert 1 not in fit.sides[len(near):]
+    assert abs(fit.e) < 0.03 and fit.k > 0

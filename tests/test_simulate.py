@@ -21,8 +21,8 @@ from lanelib.rospy_standin import Odometry as OdometryMessage
 from lanelib.rospy_standin import SimClock, StandInRospy
 from lanelib.sim.base import BaseLimits, DiffDriveBase
 from lanelib.sim.simulator import TrackSimulator, apply_variant, improved_params, odometry_message
-from lanelib.sim.tracks import TrackError, from_dict, load_track
-from lanelib.sim.world import FloorCamera, FloorMap, Scene, Track
+from lanelib.sim.tracks import TrackError, from_dict, load_track, with_world
+from lanelib.sim.world import WORLDS, FloorCamera, FloorMap, Scene, Track
 from lanelib.topics import Odometry
 
 SHORT = {'lane_width': 0.35, 'tape_width': 0.03,
@@ -246,6 +246,16 @@ def test_bends_the_lens_loses_the_lane_on_are_completed_never_searching_forward(
     searching = [c for c in sent if c.decision == 'search']
     assert searching, 'the lane never left the view: the test tests nothing'
     assert all(c.linear_x == 0.0 and c.angular_z != 0.0 for c in searching)
+
+
+def test_wood_corner_with_a_gap_in_its_outer_tape_is_completed():
+    """Wood's pitched camera on the 0.5 m corner with 20 cm of its outer tape missing where
+    the bend begins: beyond the gap that tape has turned across the view, a lane width left of
+    where it was, and was taken for the left line of a straight lane; the robot drove out of
+    the bend on the outside (53 % along, seed 0)."""
+    spec = apply_variant(with_world(load_track('corner'), WORLDS['wood']), 'gap 20 cm')
+    result = simulate.run(spec, 'improved', seed=0)
+    assert result['completed'] and result['departures'] == 0
 
 
 def test_the_improved_controller_completes_a_short_track():
