@@ -40,11 +40,16 @@ def signed_distance(x, y, e, psi, k):
     return _distance(x, y, e, psi, k)[0]
 
 
-def _distance(x, y, e, psi, k, jacobian=False):
-    """signed_distance, and with `jacobian` its derivatives in e, psi and k."""
+def _arc_frame(x, y, e, psi):
+    """(u, v, sin psi, cos psi): points in the arc's own frame, u ahead, v left of its start."""
     s, c = np.sin(psi), np.cos(psi)
     dy = y - e
-    u, v = x * c + dy * s, dy * c - x * s
+    return x * c + dy * s, dy * c - x * s, s, c
+
+
+def _distance(x, y, e, psi, k, jacobian=False):
+    """signed_distance, and with `jacobian` its derivatives in e, psi and k."""
+    u, v, s, c = _arc_frame(x, y, e, psi)
     ku, kv1 = k * u, 1 - k * v
     root = np.sqrt(ku * ku + kv1 * kv1)  # k r
     q, den = 2 * v - k * (u * u + v * v), 1 + root
@@ -141,8 +146,7 @@ def _askew(lanes, pieces):
     y = np.array([p.summary[1].mean() for p in pieces])
     phi = np.array([p.phi for p in pieces])
     e, psi, k = (lanes[:, i:i + 1] for i in range(3))
-    s, c = np.sin(psi), np.cos(psi)
-    u, v = x * c + (y - e) * s, (y - e) * c - x * s  # in the arc's frame
+    u, v, _, _ = _arc_frame(x, y, e, psi)
     heading = psi + np.arctan2(k * u, 1 - k * v)  # round the circle's centre (k 0: psi)
     turn = (phi - heading + math.pi / 2) % math.pi - math.pi / 2  # a piece has no direction
     return np.abs(turn) > ASKEW
