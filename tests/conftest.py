@@ -3,35 +3,36 @@ test modules are in helpers.py."""
 
 import os
 import shutil
-import signal
-import time
+import socket
+import threading
+import uuid
 
 import pytest
 from helpers import SAMPLES, TwistRecorder
 
-from tools.roslive import free_port, node_env, ros_processes, start_master, stop_master
+from tools.roslive import (
+    SESSION_MARK,
+    end_what_was_started,
+    free_port,
+    node_env,
+    start_master,
+    stop_master,
+)
 
 
 @pytest.fixture(scope='session', autouse=True)
 def no_ros_process_left():
-    """After the whole suite, no ROS process that it started may still run: a roscore,
-    rosmaster, rosout, roslaunch, node or subscriber left behind is killed, and the suite
-    fails. (Set up first, so torn down last, after the session's own roscore has stopped.)"""
-    before = set(ros_processes())
+    """After the whole suite, no process that it started may still run: a roscore, rosmaster,
+    rosout, roslaunch, node or subscriber left behind is killed, and the suite fails. What the
+    suite started is known by a mark in its environment (tools.roslive.marked_processes), so a
+    node, a roscore or anything else running beside the tests is never touched. (Set up first,
+    so torn down last, after the session's own roscore has stopped.)"""
+    mark = uuid.uuid4().hex
+    os.environ[SESSION_MARK] = mark  # inherited by everything the tests start
     yield
-    deadline = time.monotonic() + 10  # a stopped roscore takes a moment to end its children
-    while True:
-        left = {pid: cmd for pid, cmd in ros_processes().items() if pid not in before}
-        if not left or time.monotonic() > deadline:
-            break
-        time.sleep(0.2)
-    for pid in left:
-        try:
-            os.kill(pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
+    left = end_what_was_started(mark)
     if left:
-        pytest.fail('the tests left ROS processes running (now killed): ' +
+        pytest.fail('the tests left processes running (now killed): ' +
                     '; '.join(f'{pid} {cmd}' for pid, cmd in sorted(left.items())))
 
 
@@ -74,3 +75,43 @@ def few_frames(tmp_path):
     for name in names[::3][:8]:
         shutil.copy(os.path.join(SAMPLES, name), folder / name)
     return folder
+
+
+class SilentServer:
+    """A TCP server that accepts connections and never answers: a camera URL, or a ROS master,
+    that hangs. `url` names it; `accepted()` says how many have connected."""
+
+    def __init__(self):
+        self.server = socket.socket()
+        self.server.bind(('127.0.0.1', 0))
+        self.server.listen(8)
+        self.held, self.stop = [], threading.Event()
+        self.port = self.server.getsockname()[1]
+        self.url = f'http://127.0.0.1:{self.port}/stream.mjpg'
+        self.thread = threading.Thread(target=self._accept, daemon=True)
+        self.thread.start()
+
+    def _accept(self):
+        self.server.settimeout(0.2)
+        while not self.stop.is_set():
+            try:
+                self.held.append(self.server.accept()[0])
+            except OSError:
+                continue
+
+    def accepted(self):
+        return len(self.held)
+
+    def close(self):
+        self.stop.set()
+        self.thread.join()
+        for conn in self.held:
+            conn.close()
+        self.server.close()
+
+
+@pytest.fixture
+def silent_server():
+    server = SilentServer()
+    yield server
+    server.close()

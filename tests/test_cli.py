@@ -578,46 +578,17 @@ def test_a_setting_above_the_kobukis_limits_is_warned_of_and_what_was_sent_recor
     assert max(r['linear_x'] for r in records) == pytest.approx(0.7)
 
 
-@pytest.fixture
-def silent_server():
-    """A TCP server that accepts connections and never answers (a camera URL that hangs)."""
-    import socket
-    import threading
-
-    server = socket.socket()
-    server.bind(('127.0.0.1', 0))
-    server.listen(8)
-    held, stop = [], threading.Event()
-
-    def accept():
-        server.settimeout(0.2)
-        while not stop.is_set():
-            try:
-                held.append(server.accept()[0])
-            except OSError:
-                continue
-
-    thread = threading.Thread(target=accept, daemon=True)
-    thread.start()
-    yield f'http://127.0.0.1:{server.getsockname()[1]}/stream.mjpg'
-    stop.set()
-    thread.join()
-    for conn in held:
-        conn.close()
-    server.close()
-
-
 def test_a_url_that_never_answers_says_it_waits_times_out_and_hears_ctrl_c(silent_server):
     """Before: 30 s of silence, Ctrl-C ignored, then exit 2 with no word of a timeout."""
     import signal
     import time
 
     start = time.monotonic()
-    proc = cli('--source', silent_server, '--dry-run', '--open-timeout', '1')
+    proc = cli('--source', silent_server.url, '--dry-run', '--open-timeout', '1')
     assert proc.returncode == 2 and time.monotonic() - start < 15
     assert 'waiting up to 1 s for it to answer' in proc.stderr
     assert 'no stream from it within 1 s' in proc.stderr
-    node = subprocess.Popen([sys.executable, NODE, '--source', silent_server, '--dry-run',
+    node = subprocess.Popen([sys.executable, NODE, '--source', silent_server.url, '--dry-run',
                              '--open-timeout', '60'], cwd=REPO, stderr=subprocess.PIPE,
                             text=True)
     line = node.stderr.readline()  # the word that it waits comes before the wait

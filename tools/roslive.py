@@ -79,25 +79,48 @@ def process_tree(pid):
     return tree
 
 
-ROS_PROGRAMS = ('roscore', 'rosmaster', 'rosout', 'roslaunch', 'kobuki_lane.py', "'listener'",
-                'from tools import soak', "'camera_driver'")
+SESSION_MARK = 'KOBUKI_LANE_TEST_SESSION'  # in the environment of everything a test run starts
 
 
-def ros_processes():
-    """{pid: command line} of every running ROS 1 process (roscore, rosmaster, rosout,
-    roslaunch) and every kobuki_lane node or roslive subscriber."""
-    found = {}
+def marked_processes(mark, name=SESSION_MARK):
+    """{pid: command line} of the processes whose environment holds name=mark: those a test
+    run started (its mark is in the environment they were started with, and in that of what
+    they started in turn, even once their parent has gone). Nobody else's process is listed:
+    one whose environment cannot be read (another user's) is not ours."""
+    wanted = f'{name}={mark}'.encode()
+    found, me = {}, os.getpid()
     for entry in os.listdir('/proc'):
-        if not entry.isdigit():
+        if not entry.isdigit() or int(entry) == me:
             continue
         try:
+            with open(f'/proc/{entry}/environ', 'rb') as f:
+                if wanted not in f.read().split(b'\0'):
+                    continue
             with open(f'/proc/{entry}/cmdline', 'rb') as f:
                 cmd = f.read().replace(b'\0', b' ').decode(errors='replace').strip()
-        except OSError:
-            continue  # gone meanwhile
-        if any(program in cmd for program in ROS_PROGRAMS):
+        except OSError:  # gone meanwhile, or not ours to read
+            continue
+        if cmd:  # (a zombie has no command line left)
             found[int(entry)] = cmd[:200]
     return found
+
+
+def end_what_was_started(mark, wait=10.0):
+    """Wait up to `wait` seconds for the processes started with `mark` in their environment
+    to end (a stopped roscore takes a moment to end its children), then SIGKILL those still
+    there; returns them ({pid: command line}). Nothing without the mark is touched."""
+    deadline = time.monotonic() + wait
+    while True:
+        left = marked_processes(mark)
+        if not left or time.monotonic() > deadline:
+            break
+        time.sleep(0.2)
+    for pid in left:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass
+    return left
 
 
 def stop_master(proc, sig=signal.SIGTERM, timeout=20.0):
