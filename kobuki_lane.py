@@ -27,7 +27,7 @@ fails on is answered with a stop; while the ROS master is gone the robot is held
 
 exit status: 0 input ended or the node was shut down, 1 camera lost, repeated pipeline
 errors or an input file cut short, 2 bad arguments, an unopenable source, no frame at all, or
-no ROS master, 130 Ctrl-C, 143 SIGTERM.
+no ROS master, 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP (the terminal or ssh session gone).
 
 This file is the lecture: its settings, its pipeline (detect), its rule, its loop. The rest
 lives in lanelib/ (the speed-up, the improved controller, safety, outputs, ROS plumbing).
@@ -35,44 +35,29 @@ lives in lanelib/ (the speed-up, the improved controller, safety, outputs, ROS p
 
 import argparse
 import math
-import os
 import sys
-import time
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
-from lanelib.camera import (
-    LECTURE_CAMERA,
-    CalibrationError,
-    describe,
-    load_calibration,
-)
+from lanelib import node
+from lanelib.camera import LECTURE_CAMERA
 from lanelib.cli import check_arguments, fail
 from lanelib.fast import FastPipeline
 from lanelib.improved import ImprovedController, ImprovedParams
-from lanelib.mounting import mounting_settings
-from lanelib.outputs import Outputs, Progress, VideoSink, decision_record, summary
-from lanelib.robot import (
-    MAX_ANGULAR,
-    MAX_LINEAR,
-    STOP,
-    VELOCITY_TOPIC,
-    Command,
-    within_limits,
+from lanelib.outputs import Outputs, decision_record
+from lanelib.robot import MAX_ANGULAR, MAX_LINEAR, STOP, VELOCITY_TOPIC, Command, within_limits
+from lanelib.ros import split_ros_args
+from lanelib.safety import (
+    SafeBase,
+    Safety,
+    camera_back,
+    install_signal_handlers,
+    signals_held,
 )
-from lanelib.ros import (
-    MasterWatch,
-    RosUnavailable,
-    connect,
-    debug_publisher,
-    private_names,
-    split_ros_args,
-)
-from lanelib.safety import SafeBase, Safety, camera_back, install_signal_handlers
-from lanelib.settings import above, add_arguments, between, resolve, setting, unknown
-from lanelib.sources import Peeked, Prefetch, SourceError, check_first_frame, open_source
+from lanelib.settings import above, add_arguments, between, setting
+from lanelib.sources import Prefetch
 from lanelib.stages import (
     Detection,
     as_bgr,
@@ -81,7 +66,6 @@ from lanelib.stages import (
     region_of_interest_vertices,
     slope_sum,
 )
-from lanelib.topics import TopicError, camera_from_topic, odometry_from, topic_of
 
 PROG = 'kobuki_lane.py'
 
@@ -243,8 +227,10 @@ class LaneFollower:
     Detection and its frame's time, and told (sent) the command that went out; base: the
     safety.SafeBase every command goes through; outputs: outputs.Outputs; rate [Hz]."""
 
-    def __init__(self, ros, source, controller, base, outputs=None, rate=4.0, log_frames=True):
+    def __init__(self, ros, source, controller, base, outputs=None, rate=4.0, log_frames=True,
+                 check=None):
         self.ros, self.source, self.controller, self.base = ros, source, controller, base
+        self.check = check  # called with each frame: sources.FrameCheck, raises FrameError
         self.log_frames = log_frames  # a log line per frame (--quiet: at debug level only)
         self.outputs = outputs or Outputs(LaneParams())
         self.rate = rate
@@ -252,6 +238,7 @@ class LaneFollower:
         self.frames = 0
         self.errors = 0  # pipeline failures in a row
         self.failed = 0  # frames the pipeline failed on, in all
+        self.last_error = None  # what the last of them failed with
         self.ended = None  # why the loop ended
         self.stop_requested = None
 
@@ -267,6 +254,8 @@ class LaneFollower:
         is stale, and the robot is stopped instead."""
         ros = self.ros
         read_at = ros.get_time() if read_at is None else read_at
+        if self.check is not None:
+            self.check(frame)
         detection = self.controller.perceive(frame, keep_stages=bool(self.outputs.stages))
         command = self.controller(detection, read_at)
         late = ros.get_time() - read_at > self.base.safety.watchdog
@@ -298,6 +287,7 @@ class LaneFollower:
         """A frame the pipeline could not process: log it, stop the robot, go on."""
         self.errors += 1
         self.failed += 1
+        self.last_error = f'{type(error).__name__}: {error}'
         self.base.publish(STOP)
         self.controller.sent(STOP)
         self.ros.logerr('frame %d (%s): %s: %s; robot stopped (%d in a row)', self.frames, label,
@@ -314,11 +304,11 @@ class LaneFollower:
     def run(self, wait_for_base=0.0):
         """The loop at a steady rate, ending with the robot stopped; returns why it ended."""
         ros, safety = self.ros, self.base.safety
-        self.base.wait_for_subscriber(wait_for_base)
-        rate = ros.Rate(self.rate)
-        self.base.start_watchdog()
         lost_since = None
         try:
+            self.base.wait_for_subscriber(wait_for_base, self._stopping)
+            rate = ros.Rate(self.rate)
+            self.base.start_watchdog()
             while self.ended is None:
                 if ros.is_shutdown():
                     self.ended = 'ROS shutdown'
@@ -352,6 +342,8 @@ class LaneFollower:
                 rate.sleep()
         except ros.ROSInterruptException:
             self.ended = 'ROS shutdown'
+        except KeyboardInterrupt:  # a second Ctrl-C while a frame would not end
+            self.ended = 'SIGINT'
         finally:
             self.base.stop_watchdog()
             # fixed: nothing stopped the robot when the lecture's loop ended; always stop
@@ -363,7 +355,7 @@ class LaneFollower:
 # ---------------------------------------------------------------- wiring
 
 EXIT_STATUS = {'end of input': 0, 'ROS shutdown': 0, 'q pressed': 0, 'camera lost': 1,
-               'pipeline errors': 1, 'SIGINT': 130, 'SIGTERM': 143}
+               'pipeline errors': 1, 'SIGINT': 130, 'SIGTERM': 143, 'SIGHUP': 129}
 
 
 def build_parser():
@@ -451,141 +443,37 @@ def seconds(text):
     return value
 
 
-def settings_from(args, get_param):
-    """The tables and the controller's name: flag > private ROS parameter > default."""
-    params = resolve(LaneParams, args, get_param)
-    safety = resolve(Safety, args, get_param)
-    name = args.controller or str(get_param('~controller', 'lecture'))
-    improved = None
-    if name == 'improved':
-        mounting = args.mounting or get_param('~mounting', '')
-        improved = resolve(ImprovedParams, args, get_param, mounting_settings(mounting),
-                           f"the mounting file '{mounting}'")
-    if 1.0 / params.rate >= safety.watchdog:  # its stops would come between the commands
-        raise ValueError(f'rate {params.rate:g} Hz sends a command every {1 / params.rate:.2f} s, '
-                         f'but the watchdog stops the robot after {safety.watchdog:g} s without '
-                         'one: raise the rate or the watchdog')
-    return params, safety, name, improved
-
-
-def open_outputs(args, params, ros, source, controller):
-    bag = None
-    if args.bag:  # the one output that can still be refused: before any other is opened
-        from lanelib.bags import BagError, BagRecorder
-
-        try:
-            if args.force and os.path.isfile(args.bag):
-                os.remove(args.bag)  # --force: replaced, as the other outputs are
-            bag = BagRecorder(args.bag, VELOCITY_TOPIC, images=args.bag_images)
-        except BagError as e:
-            source.release()
-            fail(PROG, str(e))
-    show_progress = args.progress == 'on' or (args.progress == 'auto' and sys.stderr.isatty())
-    if args.stages:
-        os.makedirs(args.stages, exist_ok=True)  # made now that the run can go
-    decisions = open(args.decisions, 'w', encoding='utf-8') if args.decisions else None
-    video = VideoSink(args.video, params.rate) if args.video else None
-    debug = None if args.dry_run else debug_publisher(ros)
-    return Outputs(params, decisions, video, args.stages, bag, debug, args.show,
-                   Progress(source.total, show_progress), getattr(controller, 'draw', None),
-                   getattr(controller, 'pictures', None))
+def parse_arguments(argv):
+    """(args, private parameters from _name:=value); a mistake is exit status 2."""
+    try:
+        ours, private = split_ros_args(sys.argv[1:] if argv is None else argv)
+    except ValueError as e:
+        fail(PROG, str(e))
+    args = build_parser().parse_args(ours)
+    check_arguments(PROG, args)
+    return args, private
 
 
 def main(argv=None, make_controller=make_controller):
-    argv = sys.argv[1:] if argv is None else argv
-    ours, private = split_ros_args(argv)
-    parser = build_parser()
-    args = parser.parse_args(ours)
-    check_arguments(PROG, args)
-    topic = topic_of(args.source)
-    try:
-        camera = None if args.calibration == 'topic' else load_calibration(args.calibration)
-    except CalibrationError as e:
-        fail(PROG, str(e))
-    live = args.realtime or args.source.isdigit() or '://' in args.source or topic
-    try:
-        ros, twist_type, topic_ros = connect(args.dry_run, live, topic and f'--source {topic}',
-                                             private, args.quiet)
-    except RosUnavailable as e:
-        fail(PROG, str(e))
-    for unknown_name, guess in unknown(private_names(ros), (LaneParams, ImprovedParams, Safety),
-                                       ('controller', 'mounting', 'odom')):
-        ros.logwarn('unknown private parameter ~%s, ignored%s', unknown_name,
-                    f' (did you mean ~{guess}?)' if guess else '')
-    try:
-        params, safety, name, improved = settings_from(args, ros.get_param)
-        if args.calibration == 'topic':
-            camera = camera_from_topic(topic_ros, topic, safety.camera_retry)
-            ros.loginfo('calibration from the first camera_info beside %s: %s', topic,
-                        describe(camera))
-        for warning in improved.clipped() if improved else ():
-            ros.logwarn('%s', warning)
-        odometry = odometry_from(topic_ros, args.odom) if name == 'improved' else None
-        controller = make_controller(name, params, camera, improved, args.pipeline, odometry)
-        source = Peeked(open_source(args.source, warn=ros.logwarn, image_topic=args.image_topic,
-                                    rospy=topic_ros, fresh=safety.watchdog,
-                                    timeout=args.open_timeout))
-        # a calibration measured at a size (a file, the topic) must fit the frames; the
-        # lecture's camera has no size on the slides and scales to any frame
-        check_first_frame(source, None if args.calibration == 'lecture' else camera,
-                          ros.logwarn)
-    except (ValueError, TypeError, SourceError, TopicError) as e:
-        fail(PROG, str(e))
-    except KeyboardInterrupt:  # Ctrl-C while a URL did not answer: OpenCV may still be waiting
-        print(f'{PROG}: interrupted while opening {args.source}', file=sys.stderr, flush=True)
-        os._exit(130)
-    outputs = open_outputs(args, params, ros, source, controller)
-    base = SafeBase(ros, twist_type, safety, record=outputs.bag and outputs.bag.twist)
-    # last, so that no early exit leaves its thread inside OpenCV (that aborts the process)
-    if not source.live:
-        source = Prefetch(source)  # decode the next frames on the second core
-    follower = LaneFollower(ros, source, controller, base, outputs, params.rate, not args.quiet)
-    install_signal_handlers(follower.request_stop, base, lambda: follower.ended is None)
-    lane = getattr(controller, 'profile', None)
-    ros.loginfo('kobuki_lane: source %s, %s controller%s, algorithm %s, calibration %s, %.1f Hz '
-                'on %s%s', source.name, controller.name,
-                f' (lane {lane.name}, {controller.p.lane_width:g} m; camera '
-                f'{controller.p.camera_height:g} m up, pitched {controller.p.camera_pitch:g} deg)'
-                if lane else '',
-                params.algorithm, args.calibration,
-                params.rate, VELOCITY_TOPIC, ' (dry run)' if args.dry_run else '')
-    watch = None if args.dry_run else MasterWatch(base, ros).start()
-    start = time.monotonic()
-    try:
-        ended = follower.run(0.0 if args.dry_run else args.wait_for_base)
-    finally:
-        if watch is not None:
-            watch.stop()
-        source.release()
-        outputs.close()
-        if topic_ros is not None:
-            time.sleep(0.0 if args.dry_run else 0.3)  # deliver the final zero Twist
-            topic_ros.signal_shutdown(follower.ended or 'exception')
-    status = finish(ended, follower, source)  # its words first, the summary last
-    if outputs.stages:
-        print(f'--stages: {outputs.stage_files} pictures, {outputs.stage_bytes / 1e6:.1f} MB in '
-              f'{outputs.stages}', file=sys.stderr)
-    print(summary(follower.frames, source.skipped, follower.counts, time.monotonic() - start,
-                  ended), file=sys.stderr)
-    return status
-
-
-def finish(ended, follower, source):
-    """The exit status, and a last word where the run did not end well."""
-    if ended == 'camera lost':
-        why = f': {source.silence()}' if hasattr(source, 'silence') else ''
-        print(f"{PROG}: error: camera lost: no frame from '{source.name}'{why}", file=sys.stderr)
-    if ended == 'pipeline errors':
-        print(f'{PROG}: error: {follower.errors} frames in a row failed in the pipeline (see '
-              'the log above)', file=sys.stderr)
-    read = follower.frames + source.skipped
-    short = source.total and read < source.total - 1
-    if ended == 'end of input' and (short or getattr(source, 'cut_short', False)):
-        print(f"{PROG}: error: '{source.name}' is truncated: "
-              f"{f'it ended after {read} of its {source.total} frames' if short else 'cut short'}"
-              f', {follower.frames} acted on', file=sys.stderr)
-        return 1
-    return EXIT_STATUS.get(ended, 0)
+    args, private = parse_arguments(argv)
+    # the slides' rospy.init_node("detection"): lanelib/ros.py connect (a stand-in for a dry run)
+    ros, twist_type, topic_ros = node.connect_to_ros(PROG, args, private)
+    params, safety, controller, source, check = node.set_up(PROG, args, ros, topic_ros,
+                                                            LaneParams, make_controller)
+    with signals_held():  # a signal now is heard once the loop can end the usual way
+        outputs = node.open_outputs(PROG, args, params, ros, source, controller)
+        # the slides' rospy.Publisher('/mobile_base/commands/velocity', Twist, queue_size=1)
+        # and their Twist "thrust": SafeBase (lanelib/safety.py), the one way to the wheels
+        base = SafeBase(ros, twist_type, safety,
+                        record=outputs.record_twist if outputs.bag else None)
+        # last, so that no early exit leaves its thread inside OpenCV (that aborts the process)
+        if not source.live:
+            source = Prefetch(source)  # decode the next frames on the second core
+        follower = LaneFollower(ros, source, controller, base, outputs, params.rate,
+                                not args.quiet, check)
+        install_signal_handlers(follower.request_stop, base, lambda: follower.ended is None)
+    node.started(ros, args, follower, params)
+    return node.drive(PROG, args, follower, topic_ros)
 
 
 if __name__ == '__main__':

@@ -5,11 +5,12 @@ runs and tests need no ROS at all.
 """
 
 import os
-import socket
 import threading
 import xmlrpc.client
 
 import cv2
+
+from lanelib.settings import load_yaml
 
 
 class RosUnavailable(Exception):
@@ -17,7 +18,8 @@ class RosUnavailable(Exception):
 
 
 def split_ros_args(argv):
-    """Separate rospy's name:=value arguments from ours; _name:=value are private params."""
+    """Separate rospy's name:=value arguments from ours; _name:=value are private params, their
+    values YAML as rospy reads them (1e3 a number too). ValueError for a value that is not."""
     import yaml
 
     ours, private = [], {}
@@ -25,7 +27,12 @@ def split_ros_args(argv):
         if ':=' in arg:
             name, value = arg.split(':=', 1)
             if name.startswith('_') and not name.startswith('__'):
-                private[name[1:]] = yaml.safe_load(value)
+                try:
+                    private[name[1:]] = load_yaml(value)
+                except yaml.YAMLError as e:
+                    raise ValueError(f"'{arg}': the value after := is not YAML ("
+                                     f"{' '.join(str(e).split())}); give a number, true or "
+                                     'false, or text in quotes') from None
         else:
             ours.append(arg)
     return ours, private
@@ -42,15 +49,15 @@ def private_names(ros):
 
 
 def master_online(timeout=3.0):
-    """True if the ROS master at ROS_MASTER_URI answers within `timeout` seconds."""
-    import rosgraph
-
-    old = socket.getdefaulttimeout()
-    socket.setdefaulttimeout(timeout)
+    """True if the ROS master at ROS_MASTER_URI answers within `timeout` seconds. (rosgraph's
+    is_master_online swallows every exception, Ctrl-C included.)"""
+    uri = os.environ.get('ROS_MASTER_URI', 'http://localhost:11311')
     try:
-        return rosgraph.is_master_online()
-    finally:
-        socket.setdefaulttimeout(old)
+        master = xmlrpc.client.ServerProxy(uri, transport=TimeoutTransport(timeout))
+        code, _, _ = master.getPid('/kobuki_lane_probe')
+        return code == 1
+    except Exception:  # refused, timed out, not a master: no master there
+        return False
 
 
 def connect(dry_run, live, topics, private, quiet):

@@ -17,6 +17,7 @@ tests/test_ros_real.py runs the same loop against Debian's real rospy and checks
 real subscriber receives matches, so the two cannot drift apart.
 """
 
+import os
 import sys
 import threading
 import time
@@ -269,11 +270,12 @@ class StandInRospy:
     def sleep(self, seconds):
         self.clock.sleep(seconds)
 
-    def get_param(self, name, default=None):
+    def get_param(self, name, default=KeyError):
+        """rospy's: the value, else `default` if one is given (None too), else KeyError."""
         key = name.lstrip('~')
         if key in self.params:
             return self.params[key]
-        if default is None:
+        if default is KeyError:
             raise KeyError(name)
         return default
 
@@ -283,7 +285,10 @@ class StandInRospy:
         self.log_lines.append((level, text))
         stream = sys.stdout if level == 'INFO' else sys.stderr
         if level != 'INFO' or not self._quiet:
-            print(f'[{level}] [{self.clock.now():.3f}]: {text}', file=stream, flush=True)
+            try:
+                print(f'[{level}] [{self.clock.now():.3f}]: {text}', file=stream, flush=True)
+            except (OSError, ValueError):  # a closed pipe (| head), the terminal gone
+                _to_null(stream)
 
     def logdebug(self, msg, *args):
         self.log_lines.append(('DEBUG', msg % args if args else msg))
@@ -296,3 +301,14 @@ class StandInRospy:
 
     def logerr(self, msg, *args):
         self._emit('ERROR', msg, args)
+
+
+def _to_null(stream):
+    """What is still written to `stream` (its reader gone: | head, a closed ssh session) goes
+    to /dev/null instead: not a failure of the run, and no error at exit."""
+    try:
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, stream.fileno())
+        os.close(null)
+    except (OSError, ValueError):
+        pass

@@ -15,6 +15,7 @@ watchdog is answered with a stop, and a lost camera is stopped for at once and r
 is sent before the process exits (install_signal_handlers).
 """
 
+import contextlib
 import math
 import os
 import signal
@@ -137,10 +138,13 @@ class SafeBase:
             self.ros.logwarn('no command for %.1f s (slow frame or camera): robot stopped',
                              self.safety.watchdog)
 
-    def wait_for_subscriber(self, seconds):
-        """Wait up to `seconds` for the base to subscribe; warn if it has not."""
+    def wait_for_subscriber(self, seconds, stopping=lambda: False):
+        """Wait up to `seconds` for the base to subscribe; warn if it has not. Returns early,
+        saying nothing, once `stopping()` is true (Ctrl-C, rosnode kill)."""
         deadline = time.monotonic() + seconds
         while self._pub.get_num_connections() == 0 and time.monotonic() < deadline:
+            if stopping() or self.ros.is_shutdown():
+                return
             time.sleep(0.05)
         if self._pub.get_num_connections() == 0 and seconds > 0:
             self.ros.logwarn('nothing subscribes to %s yet (is minimal.launch running?); '
@@ -166,22 +170,37 @@ def camera_back(ros, source, base, since, retry, stopping):
     return False
 
 
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)  # Ctrl-C, kill, the ssh gone
+
+
 def install_signal_handlers(request_stop, base=None, running=None, grace=2.0):
-    """SIGINT and SIGTERM ask the loop to end (it then stops the robot); a second signal of the
-    same kind is not ignored.
+    """SIGINT, SIGTERM and SIGHUP (the terminal or ssh session to the robot gone) ask the loop
+    to end (it then stops the robot). A second signal while the loop is still `running()` is
+    not ignored: SIGINT raises KeyboardInterrupt (main ends the run without a traceback), the
+    others end the process; once the loop has ended and only the outputs are being closed,
+    it is ignored, so that a bag is not left half written.
 
     Python runs a signal handler only once the main thread is back from what it is doing, and
     an OpenCV call can take seconds (an 8000x6000 frame takes 7.5). So with `base` the signal is
     also heard at once on a thread of its own (signal.set_wakeup_fd): the robot is stopped then
     and there (base.stop(), the latch), and if the loop is still `running()` `grace` seconds
-    later the process exits (130 for SIGINT, 143 for SIGTERM), saying why."""
-    def handler(signum, _frame):
-        request_stop(signal.Signals(signum).name)
-        signal.signal(signum, signal.SIG_DFL if signum == signal.SIGTERM
-                      else signal.default_int_handler)
+    later the process exits (128 + the signal's number), saying why."""
+    heard = set()
 
-    signal.signal(signal.SIGINT, handler)
-    signal.signal(signal.SIGTERM, handler)
+    def handler(signum, _frame):
+        if running is not None and not running():
+            return  # the loop has ended: the outputs are being closed
+        if signum not in heard:
+            heard.add(signum)
+            request_stop(signal.Signals(signum).name)
+        elif signum == signal.SIGINT:
+            raise KeyboardInterrupt  # the loop ends at once (LaneFollower.run)
+        else:
+            signal.signal(signum, signal.SIG_DFL)
+            os.kill(os.getpid(), signum)
+
+    for signum in STOP_SIGNALS:
+        signal.signal(signum, handler)
     if base is None:
         return
     read, write = os.pipe()
@@ -190,14 +209,43 @@ def install_signal_handlers(request_stop, base=None, running=None, grace=2.0):
 
     def hear():
         signum = 0
-        while signum not in (signal.SIGINT, signal.SIGTERM):
+        while signum not in STOP_SIGNALS:
             signum = os.read(read, 1)[0]
         base.stop()  # the robot stops now, whatever the main thread is doing
         time.sleep(grace)
         if running is None or running():  # (once the loop has ended, its outputs close)
-            print(f'kobuki_lane: the frame in progress had not ended {grace:g} s after '
-                  f'{signal.Signals(signum).name}; the robot was stopped at once; exiting now',
-                  file=sys.stderr, flush=True)
+            say(f'kobuki_lane: the frame in progress had not ended {grace:g} s after '
+                f'{signal.Signals(signum).name}; the robot was stopped at once; exiting now')
             os._exit(128 + signum)
 
     threading.Thread(target=hear, name='signal-watch', daemon=True).start()
+
+
+@contextlib.contextmanager
+def signals_held():
+    """Ctrl-C, SIGTERM and SIGHUP wait while the loop is being put together (outputs opened, a
+    bag begun, threads started) and are raised again on leaving, where the handlers that
+    install_signal_handlers put in meanwhile hear them: they end the run the usual way, the
+    bag complete (before: a traceback from wherever the signal fell)."""
+    heard = []
+
+    def defer(signum, _frame):
+        heard.append(signum)
+
+    before = {signum: signal.signal(signum, defer) for signum in STOP_SIGNALS}
+    try:
+        yield
+    finally:
+        for signum, handler in before.items():
+            if signal.getsignal(signum) is defer:  # nothing was installed meanwhile
+                signal.signal(signum, handler)
+        for signum in heard:
+            os.kill(os.getpid(), signum)
+
+
+def say(text):
+    """A line on stderr, if there is still a stderr to write to (the ssh session may be gone)."""
+    try:
+        print(text, file=sys.stderr, flush=True)
+    except (OSError, ValueError):
+        pass
