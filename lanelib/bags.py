@@ -9,6 +9,7 @@
 Bags written here open in Debian's `rosbag info` and `rosbag.Bag`; the tests check both ways.
 """
 
+import contextlib
 import os
 import struct
 import threading
@@ -147,15 +148,24 @@ class BagRecorder:
     `rosbag reindex` makes the rest readable."""
 
     def __init__(self, path, command_topic, images=False, flush_every=1.0):
-        from rosbags.rosbag1 import Writer
+        from rosbags.rosbag1 import Writer, WriterError
 
-        if os.path.exists(path):
-            raise BagError(f"bag '{path}' exists already; remove it or choose another name")
         self.path = path
         self._store = typestore()
-        self._writer = Writer(path)
-        self._writer.open()
-        _write_header(self._writer.bio)  # Debian's layout, so rosbag reindex can mend it
+        try:  # (made only if it does not exist: two runs given one --bag cannot share it)
+            self._writer = Writer(path)
+            self._writer.open()
+        except (WriterError, FileExistsError):
+            raise BagError(f"bag '{path}' exists already (another run writing it?); remove it "
+                           'or choose another name') from None
+        except OSError as e:
+            self._abandon()
+            raise BagError(f"cannot write bag '{path}': {e.strerror}") from None
+        try:
+            _write_header(self._writer.bio)  # Debian's layout, so rosbag reindex can mend it
+        except OSError as e:
+            self._abandon()
+            raise BagError(f"cannot write bag '{path}': {e.strerror}") from None
         self._twist = self._writer.add_connection(command_topic, 'geometry_msgs/msg/Twist',
                                                   typestore=self._store)
         self._image = (self._writer.add_connection(DEBUG_TOPIC, 'sensor_msgs/msg/CompressedImage',
@@ -165,6 +175,17 @@ class BagRecorder:
         self._epoch = None
         self._lock = threading.Lock()  # the watchdog's timer records its stops too
         self._flush_every, self._flushed = flush_every, time.monotonic()
+
+    def _abandon(self):
+        """The bag this made could not be begun (a full disk): closed and removed."""
+        writer = getattr(self, '_writer', None)
+        bio = getattr(writer, 'bio', None)
+        if bio is not None:
+            writer.bio = None
+            with contextlib.suppress(OSError):  # (closing flushes: the disk is still full)
+                bio.close()
+        with contextlib.suppress(OSError):
+            os.remove(self.path)
 
     def _flush(self):
         """The open chunk to the file, and the file to the disk (rosbag reindex cannot mend a
@@ -217,7 +238,19 @@ class BagRecorder:
                     self._store.serialize_ros1(msg, 'sensor_msgs/msg/CompressedImage'))
 
     def close(self):
+        """Write the index and Debian's header; OSError when they cannot be written (the file
+        is closed all the same: the chunks flushed so far can be mended with rosbag reindex)."""
         with self._lock:
-            self._writer.close()  # the index, and rosbags' own header: Debian's again
+            try:
+                self._writer.close()  # the index, and rosbags' own header: Debian's again
+            except Exception:
+                bio, self._writer.bio = self._writer.bio, None
+                if bio is not None:
+                    with contextlib.suppress(OSError):
+                        bio.close()
+                raise
+            if not os.path.exists(self.path):
+                raise OSError(f"the bag's folder was removed during the run: nothing of "
+                              f"'{self.path}' is left")
             with open(self.path, 'r+b') as f:
                 _write_header(f, *_read_header_counts(f))

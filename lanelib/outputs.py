@@ -5,7 +5,9 @@ decided) is drawn only when something takes it: the video, a bag that records fr
 debug image topic while someone subscribes, or the window.
 """
 
+import functools
 import json
+import math
 import os
 import sys
 import time
@@ -103,14 +105,29 @@ def contact_sheet(pictures, width=320, columns=4):
 
 def write_stages(folder, index, pictures):
     """NNNN_K_stage.png for each (key, title, image) of frame NNNN, and NNNN_sheet.png with
-    all of them; returns (files, bytes) written."""
-    paths = []
-    for k, (key, _, image) in enumerate(pictures):
-        paths.append(os.path.join(folder, f'{index:04d}_{k}_{key}.png'))
-        cv2.imwrite(paths[-1], image)
+    all of them; returns (files, bytes) written. OSError when a picture could not be written
+    (a full disk, the folder gone: cv2.imwrite only says False)."""
+    paths = [os.path.join(folder, f'{index:04d}_{k}_{key}.png')
+             for k, (key, _, _) in enumerate(pictures)]
+    images = [image for _, _, image in pictures]
     paths.append(os.path.join(folder, f'{index:04d}_sheet.png'))
-    cv2.imwrite(paths[-1], contact_sheet([(title, image) for _, title, image in pictures]))
-    return len(paths), sum(os.path.getsize(path) for path in paths if os.path.exists(path))
+    images.append(contact_sheet([(title, image) for _, title, image in pictures]))
+    for path, image in zip(paths, images):
+        if not cv2.imwrite(path, image) or not os.path.getsize(path):
+            raise OSError(f"cannot write '{path}' (is the disk full, or the folder gone?)")
+    return len(paths), sum(os.path.getsize(path) for path in paths)
+
+
+def finite(value):
+    """A record's value with every float that is not finite (NaN, inf) made None: JSON has no
+    NaN, and a reader of the records would fail on it."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [finite(v) for v in value]
+    return value
 
 
 def decision_record(index, label, detection, command, t, extra):
@@ -124,11 +141,14 @@ def decision_record(index, label, detection, command, t, extra):
 
 
 class VideoSink:
-    """Annotated frames to a video file, at the loop rate; opened on the first frame."""
+    """Annotated frames to a video file, at the loop rate; opened on the first frame. close()
+    checks that every frame is in the file: OpenCV's writer says nothing when the disk is
+    full."""
 
     def __init__(self, path, fps):
         self.path, self.fps = path, fps
         self._writer, self._size = None, None
+        self.frames = 0
 
     def write(self, image):
         if self._writer is None:
@@ -141,10 +161,19 @@ class VideoSink:
         if (image.shape[1], image.shape[0]) != self._size:
             image = cv2.resize(image, self._size)
         self._writer.write(image)
+        self.frames += 1
 
     def close(self):
-        if self._writer is not None:
-            self._writer.release()
+        if self._writer is None:
+            return
+        self._writer.release()
+        self._writer = None
+        capture = cv2.VideoCapture(self.path)
+        readable = int(capture.get(cv2.CAP_PROP_FRAME_COUNT)) if capture.isOpened() else 0
+        capture.release()
+        if readable < self.frames:
+            raise OSError(f'only {readable} of its {self.frames} frames are in the file (is the '
+                          'disk full?)')
 
 
 class Progress:
@@ -164,13 +193,19 @@ class Progress:
         self._last = now
         of = f'/{self.total}' if self.total else ''
         fps = frames / max(now - self.start, 1e-9)
-        self.stream.write(f'\rframe {frames}{of}  {fps:.1f} frames/s ')
-        self.stream.flush()
+        self._write(f'\rframe {frames}{of}  {fps:.1f} frames/s ')
+
+    def _write(self, text):
+        try:
+            self.stream.write(text)
+            self.stream.flush()
+        except (OSError, ValueError):  # the terminal gone: no more progress, the run goes on
+            self.enabled = False
 
     def done(self):
         if self.enabled:
             self.update(self.frames, final=True)
-            self.stream.write('\n')
+            self._write('\n')
 
 
 class Outputs:
@@ -180,35 +215,90 @@ class Outputs:
     stage of every frame; bag: a bags.BagRecorder (frames, if it records them); debug:
     (publisher, message maker) for the debug image topic; show: a window; draw(detection,
     command, p): what makes the annotated picture (annotate: the lecture's); pictures(detection,
-    command, p): the stages' (key, title, image) (lecture_pictures)."""
+    command, p): the stages' (key, title, image) (lecture_pictures).
+
+    An output that cannot be written (a full disk, its folder removed) is said once through
+    `warn`, closed and left out from then on; the others, and the run, go on. `failures` says
+    which and why ({'--decisions FILE': why}), for the run's last word and its exit status."""
 
     def __init__(self, p, decisions=None, video=None, stages=None, bag=None, debug=None,
-                 show=False, progress=None, draw=None, pictures=None):
+                 show=False, progress=None, draw=None, pictures=None, warn=None):
         self.p, self.decisions, self.video, self.stages = p, decisions, video, stages
         self.stage_files = self.stage_bytes = 0  # what --stages has written
         self.bag, self.show, self.draw = bag, show, draw or annotate
         self.pictures = pictures or (lambda d, c, p: lecture_pictures(d, c, p, self.draw))
         self.debug, self.debug_message = debug or (None, None)
         self.progress = progress or Progress()
+        self.failures = {}
+        self._warn = warn or (lambda text: print(f'warning: {text}', file=sys.stderr))
+        self._frame = None  # the frame being written, for the failures' word
+
+    def _names(self):
+        """{attribute: how the user named it} for each output there is."""
+        names = {'debug': 'the debug image topic'}
+        if self.decisions is not None:
+            names['decisions'] = f"--decisions '{getattr(self.decisions, 'name', '')}'"
+        if self.video is not None:
+            names['video'] = f"--video '{self.video.path}'"
+        if self.bag is not None:
+            names['bag'] = f"--bag '{self.bag.path}'"
+        if self.stages:
+            names['stages'] = f"--stages '{self.stages}'"
+        return names
+
+    def _safely(self, sink, action):
+        """Do `action` for one output; if it fails, say so, close it and leave it out."""
+        if not getattr(self, sink):
+            return
+        try:
+            action()
+        except Exception as e:  # OSError, or what OpenCV and rosbags make of one
+            name = self._names()[sink]
+            at = f' at frame {self._frame}' if self._frame is not None else ''
+            self.failures[name] = f'{_why(e)}{at}'
+            self._warn(f'{name} cannot be written{at} ({_why(e)}): it is left out from now on; '
+                       'the run goes on')
+            self._close(sink)
+
+    def _close(self, sink):
+        """Close one output; a failure is kept in `failures` (the first one said stands)."""
+        out, name = getattr(self, sink), self._names().get(sink)
+        setattr(self, sink, None)
+        if not out or sink in ('stages', 'debug'):
+            return
+        try:
+            out.close()
+        except Exception as e:
+            self.failures.setdefault(name, f'{_why(e)} when it was closed')
 
     def write(self, record):
         if self.decisions is not None:
-            self.decisions.write(json.dumps(record) + '\n')
-            self.decisions.flush()
+            line = json.dumps(finite(record)) + '\n'
+
+            def write():
+                self.decisions.write(line)
+                self.decisions.flush()
+
+            self._safely('decisions', write)
 
     def frame(self, record, detection, command, t):
         """A frame's record and pictures; True if the window's user pressed q."""
+        self._frame = record['frame']
         self.write(record)
         if self.stages:
-            files, size = write_stages(self.stages, record['frame'],
-                                       self.pictures(detection, command, self.p))
-            self.stage_files, self.stage_bytes = self.stage_files + files, self.stage_bytes + size
+            def stages():
+                files, size = write_stages(self.stages, record['frame'],
+                                           self.pictures(detection, command, self.p))
+                self.stage_files += files
+                self.stage_bytes += size
+
+            self._safely('stages', stages)
         quit_pressed = False
         sinks = self._picture_sinks(t)
         if sinks or self.show:  # the annotated picture is drawn only when something takes it
             image = self.draw(detection, command, self.p)
-            for sink in sinks:
-                sink(image)
+            for sink, action in sinks:
+                self._safely(sink, functools.partial(action, image))
             if self.show:
                 cv2.imshow('kobuki_lane', image)
                 quit_pressed = cv2.waitKey(1) & 0xFF == ord('q')
@@ -218,17 +308,28 @@ class Outputs:
     def _picture_sinks(self, t):
         sinks = []
         if self.video is not None:
-            sinks.append(self.video.write)
+            sinks.append(('video', self.video.write))
         if self.bag is not None and self.bag.images:
-            sinks.append(lambda image: self.bag.image(t, image))
+            sinks.append(('bag', lambda image: self.bag.image(t, image)))
         if self.debug is not None and self.debug.get_num_connections() > 0:
-            sinks.append(lambda image: self.debug.publish(self.debug_message(image)))
+            sinks.append(('debug', lambda image: self.debug.publish(self.debug_message(image))))
         return sinks
 
+    def record_twist(self, t, linear_x, angular_z):
+        """A command sent, into the bag (SafeBase's record)."""
+        self._safely('bag', lambda: self.bag.twist(t, linear_x, angular_z))
+
     def close(self):
-        for sink in (self.decisions, self.video, self.bag):
-            if sink is not None:
-                sink.close()
+        """Close every output, each whatever became of the others."""
+        for sink in ('decisions', 'video', 'bag', 'stages'):
+            self._close(sink)
+
+
+def _why(error):
+    """An error in a few words: the OS's own for an OSError."""
+    if isinstance(error, OSError) and error.strerror:
+        return error.strerror + (f": '{error.filename}'" if error.filename else '')
+    return ' '.join(str(error).split()) or type(error).__name__
 
 
 def summary(frames, skipped, counts, elapsed, ended):
