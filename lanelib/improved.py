@@ -55,8 +55,9 @@ from lanelib.fast import Layout
 from lanelib.geometry import Mounting, floor_to_pixels, floor_to_row
 from lanelib.lanefit import LaneFit, find_lane, fit_lanes, signed_distance
 from lanelib.lanes import load_lane
+from lanelib.mounting import BOUNDS as MOUNTING
 from lanelib.outputs import draw_curve, text_band, tint
-from lanelib.robot import MAX_ANGULAR, MAX_LINEAR, STOP, Command, arc_step
+from lanelib.robot import MAX_ANGULAR, MAX_LINEAR, STOP, Command, arc_step, could_move
 from lanelib.settings import between, finite, fraction, non_negative, positive, setting
 from lanelib.stages import Detection, as_bgr, slope_sum
 
@@ -71,13 +72,14 @@ def lane_spec(spec):
 class ImprovedParams:
     """The improved controller's settings: perception, estimate, steering."""
 
-    camera_height: float = setting(0.20, 'camera lens above the floor', 'm', positive)
+    camera_height: float = setting(0.20, 'camera lens above the floor', 'm',
+                                   MOUNTING['height'])
     camera_pitch: float = setting(0.0, 'camera optical axis below horizontal', 'deg',
-                                  finite)
+                                  MOUNTING['pitch_deg'])
     camera_forward: float = setting(0.10, 'camera lens ahead of the robot centre', 'm',
-                                    finite)
+                                    MOUNTING['forward'])
     camera_roll: float = setting(0.0, "camera turned about its optical axis, + when its right "
-                                 'side is lower', 'deg', between(-45, 45))
+                                 'side is lower', 'deg', MOUNTING['roll_deg'])
     lane: str = setting('lecture', 'what the lane looks like: lecture (two tapes of any colour, '
                         '0.35 m), duckietown (yellow dashed left, white right), autorace (yellow '
                         'left, white right), or a lane profile YAML (lanelib/lanes.py)',
@@ -525,10 +527,11 @@ class ImprovedController:
         found (within three quarters of a lane width of its centre)."""
         return abs(meas.a) <= 0.75 * self.p.lane_width
 
-    def moved(self, t):
-        """How odometry says the robot moved since the last frame, in the robot's frame then:
-        (ahead [m], left [m], turned [rad]); None while it does not come (then the controller
-        dead-reckons on the command sent)."""
+    def moved(self, t, dt):
+        """How odometry says the robot moved since the last frame, `dt` seconds ago, in the
+        robot's frame then: (ahead [m], left [m], turned [rad]); None while it does not come,
+        or when it moved further than the robot can (then the controller dead-reckons on the
+        command sent)."""
         pose = self.odometry.pose(t) if (self.odometry is not None and t is not None) else None
         last, self.odom_pose = self.odom_pose, pose
         if pose is None or last is None:
@@ -536,6 +539,8 @@ class ImprovedController:
         dx, dy = pose[0] - last[0], pose[1] - last[1]
         c, s = math.cos(last[2]), math.sin(last[2])
         turned = math.atan2(math.sin(pose[2] - last[2]), math.cos(pose[2] - last[2]))
+        if not could_move(math.hypot(dx, dy), turned, dt):
+            return None  # odometry took a new origin since the last frame: not a motion
         return c * dx + s * dy, -s * dx + c * dy, turned
 
     def __call__(self, detection, t=None):
@@ -543,7 +548,7 @@ class ImprovedController:
         p = self.p
         dt = self.elapsed(t)
         self.cluttered = detection.cluttered
-        moved = self.moved(t)  # by odometry: (ahead, left, turned); else dead reckoning
+        moved = self.moved(t, dt)  # by odometry: (ahead, left, turned); else dead reckoning
         if moved is None:
             ds, dtheta = self.last[0] * dt, self.last[1] * dt
         else:

@@ -43,3 +43,13 @@ def arc_step(x, y, yaw, v, omega, dt):
         return x + v * dt * math.cos(yaw), y + v * dt * math.sin(yaw), yaw2
     r = v / omega
     return x + r * (math.sin(yaw2) - math.sin(yaw)), y - r * (math.cos(yaw2) - math.cos(yaw)), yaw2
+
+
+def could_move(distance, turn, dt, slack=2.0):
+    """Whether the robot can have moved `distance` [m] and turned `turn` [rad] in `dt` [s]: at
+    most `slack` times its top speeds, and 5 cm and 0.2 rad besides (odometry comes in bursts
+    after a stall, and each message is a step of its own). Odometry that jumps further is
+    not believed."""
+    return (math.isfinite(distance) and math.isfinite(turn) and
+            abs(distance) <= slack * MAX_LINEAR * max(dt, 0.0) + 0.05 and
+            abs(turn) <= slack * MAX_ANGULAR * max(dt, 0.0) + 0.2)
