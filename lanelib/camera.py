@@ -6,6 +6,7 @@ as LECTURE_CAMERA. Any other camera is loaded from the YAML layout that ROS's
 `camera_calibration` writes (image_width, image_height, camera_matrix, distortion_coefficients).
 """
 
+import json
 import math
 import os
 from dataclasses import dataclass
@@ -89,6 +90,10 @@ def load_calibration(spec):
     return read_camera_info(spec)
 
 
+DISTORTION_LENGTHS = (4, 5, 8, 12, 14)  # what OpenCV's plumb_bob and rational models take
+MODELS = ('plumb_bob', 'rational_polynomial')
+
+
 def _matrix(doc, field, rows, cols, path):
     block = doc.get(field)
     if not isinstance(block, dict) or 'data' not in block:
@@ -98,17 +103,45 @@ def _matrix(doc, field, rows, cols, path):
         values = np.array(data, dtype=float).ravel()
     except (TypeError, ValueError):
         raise CalibrationError(f"{path}: field '{field}.data' must be a list of numbers") from None
-    if cols is None:  # distortion: any length OpenCV accepts
-        if values.size not in (4, 5, 8, 12, 14):
-            raise CalibrationError(f"{path}: field '{field}.data' has {values.size} values; "
-                                   "expected 4, 5, 8, 12 or 14")
+    if cols is None:  # distortion: checked with the rest in checked_camera
         return values
     if values.size != rows * cols:
         raise CalibrationError(f"{path}: field '{field}.data' has {values.size} values; "
                                f"expected {rows * cols} ({rows}x{cols})")
-    if not np.all(np.isfinite(values)):
-        raise CalibrationError(f"{path}: field '{field}.data' has a value that is not finite")
     return values.reshape(rows, cols)
+
+
+def checked_camera(name, k, dist, size, model, where, fields=None):
+    """A Camera from a calibration's parts, each checked as ROS's camera_calibration would
+    write it; CalibrationError names `where` (a file, a topic) and the field at fault. fields:
+    the names the source gives K, D and the model (a YAML's, or CameraInfo's). D empty: no
+    distortion (a simulated or rectified camera's camera_info says so)."""
+    kf, df, mf = fields or ('camera_matrix', 'distortion_coefficients', 'distortion_model')
+    k, dist = np.asarray(k, float).reshape(3, 3), np.asarray(dist, float).ravel()
+    if not np.all(np.isfinite(k)):
+        raise CalibrationError(f"{where}: field '{kf}' has a value that is not finite")
+    if k[0, 0] <= 0 or k[1, 1] <= 0:
+        raise CalibrationError(f"{where}: field '{kf}' needs positive fx and fy")
+    if not np.allclose(k[2], [0.0, 0.0, 1.0]) or k[1, 0] != 0:
+        raise CalibrationError(f"{where}: field '{kf}' is not a camera matrix "
+                               '([fx, 0, cx, 0, fy, cy, 0, 0, 1])')
+    if model not in MODELS:
+        raise CalibrationError(f"{where}: field '{mf}' is '{model}'; "
+                               f"only {' and '.join(MODELS)} are supported")
+    if dist.size == 0:
+        dist = np.zeros(5)
+    if dist.size not in DISTORTION_LENGTHS:
+        raise CalibrationError(f"{where}: field '{df}' has {dist.size} values; expected "
+                               f"{', '.join(map(str, DISTORTION_LENGTHS[:-1]))} or "
+                               f'{DISTORTION_LENGTHS[-1]}')
+    if not np.all(np.isfinite(dist)):
+        raise CalibrationError(f"{where}: field '{df}' has a value that is not finite")
+    camera = Camera(name, k, dist, tuple(size))
+    problem = folds(camera)
+    if problem:
+        raise CalibrationError(f"{where}: field '{df}' "
+                               f'{np.array2string(dist, precision=3)} {problem}; recalibrate')
+    return camera
 
 
 def read_camera_info(path):
@@ -126,22 +159,13 @@ def read_camera_info(path):
             raise CalibrationError(f"{path}: field '{field}' must be a positive integer")
         size.append(value)
     k = _matrix(doc, 'camera_matrix', 3, 3, path)
-    if k[0, 0] <= 0 or k[1, 1] <= 0:
-        raise CalibrationError(f"{path}: field 'camera_matrix' needs positive fx and fy")
-    model = doc.get('distortion_model', 'plumb_bob')
-    if model not in ('plumb_bob', 'rational_polynomial'):
-        raise CalibrationError(f"{path}: field 'distortion_model' is '{model}'; "
-                               "only plumb_bob and rational_polynomial are supported")
-    if not np.allclose(k[2], [0.0, 0.0, 1.0]) or k[1, 0] != 0:
-        raise CalibrationError(f"{path}: field 'camera_matrix' is not a camera matrix "
-                               '([fx, 0, cx, 0, fy, cy, 0, 0, 1])')
     dist = _matrix(doc, 'distortion_coefficients', 1, None, path)
-    camera = Camera(str(doc.get('camera_name', path)), k, dist, tuple(size))
-    problem = folds(camera)
-    if problem:
-        raise CalibrationError(f"{path}: field 'distortion_coefficients' "
-                               f'{np.array2string(dist, precision=3)} {problem}; recalibrate')
-    return camera
+    if dist.size == 0:
+        raise CalibrationError(f"{path}: field 'distortion_coefficients.data' is empty; give "
+                               '[0, 0, 0, 0, 0] for a camera without distortion')
+    return checked_camera(str(doc.get('camera_name', path)), k, dist, size,
+                          doc.get('distortion_model', 'plumb_bob'), path,
+                          ('camera_matrix', 'distortion_coefficients.data', 'distortion_model'))
 
 
 def folds(camera):
@@ -181,7 +205,7 @@ def camera_info_yaml(camera):
     k = camera.matrix
     projection = np.hstack([k, np.zeros((3, 1))])
     return (f'image_width: {camera.image_size[0]}\nimage_height: {camera.image_size[1]}\n'
-            f'camera_name: {camera.name}\ncamera_matrix:\n{block(3, 3, k)}'
+            f'camera_name: {json.dumps(camera.name)}\ncamera_matrix:\n{block(3, 3, k)}'
             f'distortion_model: plumb_bob\n'
             f'distortion_coefficients:\n{block(1, len(camera.distortion), camera.distortion)}'
             f'rectification_matrix:\n{block(3, 3, np.eye(3))}'

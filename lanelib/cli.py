@@ -7,6 +7,7 @@ import sys
 import cv2
 
 from lanelib.settings import output_problem
+from lanelib.topics import topic_of, topic_problem
 
 
 def fail(prog, message):
@@ -27,19 +28,23 @@ def check_output(prog, path, what):
         fail(prog, f"{what} '{path}': {problem}")
 
 
-def check_outputs_apart(prog, source, outputs, stages, force):
-    """Refuse an output that would destroy an input or another output: one that is the
-    source file, lies in the source folder (it would be read as a frame), is named twice, or
-    exists already (unless `force`); and a --stages folder that is the source folder."""
-    where = os.path.realpath(source) if os.path.exists(source) else None
+def check_outputs_apart(prog, inputs, outputs, force, stages=None):
+    """Refuse an output that would destroy an input or another output, for every program:
+    one that is an input file (inputs: (path, what) of everything the run reads), lies in an
+    input folder (its files are read as frames), is named twice, or exists already (unless
+    `force`); and a --stages folder that is an input folder."""
+    read = [(os.path.realpath(path), what) for path, what in inputs
+            if path and os.path.exists(path)]
     seen = {}
     for path, what in outputs:
         real = os.path.realpath(path)
-        if where and real == where:
-            fail(prog, f"{what} '{path}' is the --source itself: writing it would destroy it")
-        if where and os.path.isdir(where) and os.path.dirname(real) == where:
-            fail(prog, f"{what} '{path}' is inside the --source folder, where it would be read "
-                       'as a frame; write it elsewhere')
+        for where, source in read:
+            if real == where:
+                fail(prog, f"{what} '{path}' is the {source} itself: writing it would destroy "
+                           'it')
+            if os.path.isdir(where) and os.path.dirname(real) == where:
+                fail(prog, f"{what} '{path}' is inside the {source} folder, where it would be "
+                           'read as a frame; write it elsewhere')
         if real in seen:
             fail(prog, f"{what} and {seen[real]} are the same file '{path}'")
         seen[real] = what
@@ -58,13 +63,21 @@ def check_outputs_apart(prog, source, outputs, stages, force):
             fail(prog, f"{what} '{path}': cannot write it ({e.strerror})")
         if not existed:
             os.remove(real)
-    if stages and where and os.path.realpath(stages) == where:
-        fail(prog, f"--stages '{stages}' is the --source folder; its pictures would be read as "
-                   'frames')
+    for where, source in read:
+        if stages and os.path.realpath(stages) == where:
+            fail(prog, f"--stages '{stages}' is the {source} folder; its pictures would be "
+                       'read as frames')
 
 
 def check_arguments(prog, args):
     """Everything about the arguments that can be checked before anything is opened."""
+    topic = topic_of(args.source)
+    if topic is not None and topic_problem(topic):
+        fail(prog, topic_problem(topic))
+    if args.calibration == 'topic' and topic is None:
+        fail(prog, f"--calibration topic reads the camera_info beside a ROS image topic, and "
+                   f"--source '{args.source}' is not one: give --source ros:TOPIC (e.g. "
+                   'ros:/camera/rgb/image_raw), or --calibration lecture, none or a FILE')
     if args.stages:  # a folder that exists, or one to make in a folder that does
         if os.path.exists(args.stages) and not os.path.isdir(args.stages):
             fail(prog, f"--stages '{args.stages}': not a folder")
@@ -79,7 +92,9 @@ def check_arguments(prog, args):
                if path]
     for path, what in outputs:
         check_output(prog, path, what)
-    check_outputs_apart(prog, args.source, outputs, args.stages, args.force)
+    inputs = [(args.source, '--source'), (args.calibration, '--calibration'),
+              (args.mounting, '--mounting'), (args.lane, '--lane')]
+    check_outputs_apart(prog, inputs, outputs, args.force, args.stages)
     if args.show:
         if not os.environ.get('DISPLAY') and not os.environ.get('WAYLAND_DISPLAY'):
             fail(prog, '--show needs a display (DISPLAY is not set); use --video FILE instead')

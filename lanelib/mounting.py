@@ -25,9 +25,12 @@ import cv2
 import numpy as np
 
 from lanelib.geometry import Mounting
-from lanelib.settings import read_yaml
+from lanelib.settings import above, between, read_yaml
 
 KEYS = ('height', 'pitch_deg', 'roll_deg', 'forward')
+# the bounds of a mounting, in a file or as the improved controller's flags alike
+BOUNDS = dict(height=above(0, 2), pitch_deg=between(-45, 80), roll_deg=between(-45, 45),
+              forward=between(-2, 2))
 MAX_ERROR_PX = 2.0  # a fit worse than this is refused: the board or its settings are wrong
 
 
@@ -65,17 +68,29 @@ def board_points(pattern, square, board_ahead):
     return np.stack([x, y, np.zeros_like(x)], axis=-1).reshape(-1, 3).astype(np.float64)
 
 
+def find_corners(gray, pattern):
+    """A chessboard's inner corners (columns x rows) to a thousandth of a pixel, in OpenCV's
+    order, or None if the whole board is not in the picture (or the picture is too small to
+    look in: OpenCV fails on it). calibration.py --images and --ground both use this."""
+    try:
+        found, corners = cv2.findChessboardCorners(
+            gray, pattern, flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
+        if not found:
+            return None
+        criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 40, 0.001)
+        return cv2.cornerSubPix(gray, corners, (5, 5), (-1, -1), criteria)
+    except cv2.error:  # a picture of a few pixels: no board in it
+        return None
+
+
 def find_board(gray, pattern):
     """The chessboard's inner corners to a tenth of a pixel as a (rows, columns, 2) grid,
     nearest row first and each row from the robot's right to its left (the picture's right to
     its left), or None if the whole board is not found. OpenCV numbers the corners from any
     corner of the board; the grid is turned so that it reads as board_points."""
-    found, corners = cv2.findChessboardCorners(
-        gray, pattern, flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
-    if not found:
+    corners = find_corners(gray, pattern)
+    if corners is None:
         return None
-    criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 40, 0.001)
-    corners = cv2.cornerSubPix(gray, corners, (5, 5), (-1, -1), criteria)
     cols, rows = pattern
     grid = corners.reshape(rows, cols, 2)
 
@@ -203,12 +218,10 @@ def read_mounting(path):
         if isinstance(value, bool) or not isinstance(value, (int, float)) or \
                 not math.isfinite(value):
             raise MountingError(f"{path}: field '{key}' must be a number, not {value!r}")
+        if not BOUNDS[key](value):
+            raise MountingError(f"{path}: field '{key}' is {value:g}; it must be "
+                                f'{BOUNDS[key].range}')
         values[key] = float(value)
-    if values['height'] <= 0:
-        raise MountingError(f"{path}: field 'height' must be above 0")
-    if not -45 <= values['pitch_deg'] <= 80 or abs(values['roll_deg']) > 45:
-        raise MountingError(f"{path}: field 'pitch_deg' must be -45 to 80 and 'roll_deg' "
-                            '-45 to 45')
     return Mounting(**values)
 
 

@@ -20,6 +20,29 @@ def output_problem(path):
     return None
 
 
+def yaml_loader():
+    """PyYAML's SafeLoader, also reading 1e3 and 1e-05 as numbers (YAML 1.2 and JSON do; PyYAML
+    follows YAML 1.1, which wants a dot, and makes them strings)."""
+    import re
+
+    import yaml
+
+    class Loader(yaml.SafeLoader):
+        pass
+
+    Loader.add_implicit_resolver(
+        'tag:yaml.org,2002:float', re.compile(r'^[-+]?[0-9][0-9_]*(\.[0-9_]*)?[eE][-+]?[0-9]+$'),
+        list('-+0123456789'))
+    return Loader
+
+
+def load_yaml(text):
+    """One YAML document from text, read as yaml_loader() does."""
+    import yaml
+
+    return yaml.load(text, Loader=yaml_loader())  # noqa: S506 (a SafeLoader)
+
+
 def read_yaml(path, error, what='YAML'):
     """The document in a YAML file (which also reads JSON); when it cannot be read, `error`
     (an exception type) is raised with the file and the reason, never a traceback."""
@@ -27,8 +50,8 @@ def read_yaml(path, error, what='YAML'):
 
     try:
         with open(path, encoding='utf-8') as f:
-            return yaml.safe_load(f)
-    except (OSError, yaml.YAMLError) as e:  # on one line: YAML's own message has several
+            return load_yaml(f)
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as e:  # on one line: YAML's own
         raise error(f"{path}: cannot read as {what}: {' '.join(str(e).split())}") from None
 
 
@@ -129,16 +152,33 @@ def resolve(table, args, get_param, defaults=None, file=None):
                         PARAMETER.format(name=f.name) if value is not fallback else
                         file if f.name in defaults else None)
         kind = _kind(f)
+        if kind in (int, float) and isinstance(value, str):
+            value = _number(value)  # a number as text: a launch file's str, or 1e3 for rospy
         if kind in (int, float) and (isinstance(value, bool) or
                                      not isinstance(value, (int, float))):
             raise ValueError(f'{f.name} = {value!r} is not a number (from '
                              f'{came[f.name] or "the default"}): {f.metadata["help"]}')
+        if kind is int and not (math.isfinite(value) and value == int(value)):
+            raise ValueError(f'{f.name} = {value!r} is not a whole number (from '
+                             f'{came[f.name] or "the default"}): {f.metadata["help"]}')
         if kind is float:
             value = float(value)
+        elif kind is int:
+            value = int(value)
         elif kind is str:
             value = str(value)
         values[f.name] = value
     return validate(table(**values), came)
+
+
+def _number(text):
+    """The int or float `text` spells, or text itself when it spells none."""
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
 
 
 def unknown(names, tables, others=()):

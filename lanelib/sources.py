@@ -21,7 +21,7 @@ import cv2
 
 from lanelib.camera import aspect_problem
 from lanelib.cli import warning
-from lanelib.topics import topic_of
+from lanelib.topics import topic_of, topic_problem
 
 IMAGE_EXTENSIONS = ('.png', '.jpg', '.jpeg', '.bmp', '.tif', '.tiff', '.webp', '.pgm', '.ppm',
                     '.pnm')
@@ -298,9 +298,9 @@ def open_source(spec, warn=None, image_topic=None, rospy=None, fresh=0.4, timeou
     if topic is not None:
         from lanelib.topics import TopicSource
 
-        if rospy is None or not topic.startswith('/'):
-            raise SourceError(f"cannot open '{spec}': give a topic name after ros:, e.g. "
-                              'ros:/camera/rgb/image_raw, and a ROS master')
+        problem = topic_problem(topic)
+        if problem or rospy is None:
+            raise SourceError(problem or f"cannot open '{spec}': a live topic needs a ROS master")
         return TopicSource(rospy, topic, fresh=fresh, wait=fresh)
     if spec.lower().endswith('.bag') and os.path.isfile(spec):
         from lanelib.bags import BagError, BagSource
@@ -337,10 +337,39 @@ def open_source(spec, warn=None, image_topic=None, rospy=None, fresh=0.4, timeou
     return CaptureSource(spec, spec, live=False, warn=warn)
 
 
-def check_first_frame(source, camera, warn):
-    """Before anything runs (no output made yet): a file source with no readable frame, and a
-    calibration for another aspect ratio, are refused (SourceError); frames that would take
-    seconds each are said to."""
+class FrameError(ValueError):
+    """A frame the node cannot use as it is; the message says why."""
+
+
+class FrameCheck:
+    """Looks at each frame whose size differs from the last one's (a camera can switch its
+    resolution mid-run, a folder can hold pictures of several sizes): one that a calibration
+    made at another aspect ratio would stretch is refused (FrameError: the loop stops the robot
+    for it), and frames that would take seconds each are said to. camera: a calibration with
+    a size (a file, the topic's), or None (the lecture's camera scales to any frame)."""
+
+    def __init__(self, camera, warn):
+        self.camera, self.warn = camera, warn
+        self.size = None  # the last size seen
+
+    def __call__(self, frame):
+        h, w = frame.shape[:2]
+        if (w, h) == self.size:
+            return
+        problem = self.camera is not None and aspect_problem(self.camera, w, h)
+        if problem:
+            raise FrameError(problem)  # (and so again for the next frame of this size)
+        was, self.size = self.size, (w, h)
+        if was is not None:
+            self.warn('frames are %dx%d now (were %dx%d)', w, h, *was)
+        said = size_warning(frame)
+        if said:
+            self.warn('%s', said)
+
+
+def check_first_frame(source, check):
+    """Before anything runs (no output made yet): a file source with no readable frame, or
+    whose first frame `check` (a FrameCheck) refuses, is refused (SourceError)."""
     ok, frame, _ = source.first
     if not ok and not source.live:  # refused before any output is made
         source.release()
@@ -348,10 +377,8 @@ def check_first_frame(source, camera, warn):
                           'an unsupported format?)')
     if not ok:
         return
-    problem = camera is not None and aspect_problem(camera, frame.shape[1], frame.shape[0])
-    if problem:
+    try:
+        check(frame)
+    except FrameError as e:
         source.release()
-        raise SourceError(problem)
-    said = size_warning(frame)
-    if said:
-        warn('%s', said)
+        raise SourceError(str(e)) from None
