@@ -47,24 +47,17 @@ import cv2
 import numpy as np
 
 from lanelib.camera import CalibrationError, Camera, camera_info_yaml, describe, load_calibration
+from lanelib.cli import check_output, check_outputs_apart
 from lanelib.mounting import (
     MountingError,
+    find_corners,
     mounting_yaml,
     parse_pattern,
     solve_mounting,
     warnings,
 )
-from lanelib.settings import output_problem
 
-
-def find_corners(gray, pattern):
-    """The chessboard's inner corners to a tenth of a pixel, or None if it is not all there."""
-    found, corners = cv2.findChessboardCorners(
-        gray, pattern, flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
-    if not found:
-        return None
-    criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 0.01)
-    return cv2.cornerSubPix(gray, corners, (5, 5), (-1, -1), criteria)
+PROG = 'calibration.py'
 
 
 @dataclass
@@ -140,15 +133,20 @@ def positive_float(text):
     return value
 
 
+def check_written(args, inputs):
+    """-o: refused when its folder cannot be written, when it is one of the inputs, or when it
+    exists already without --force (the node's rule, lanelib/cli.py); exit 2."""
+    check_output(PROG, args.output, '-o')
+    check_outputs_apart(PROG, inputs, [(args.output, '-o')], args.force)
+
+
 def run_calibration(args):
     import glob
 
-    problem = output_problem(args.output)
-    if problem:
-        raise CalibrationError(f"cannot write '{args.output}': {problem}")
     paths = sorted(glob.glob(args.images))
     if not paths:
         raise CalibrationError(f"no files match '{args.images}' (quote the pattern)")
+    check_written(args, [(path, '--images picture') for path in paths])
     result = calibrate(paths, args.pattern, args.square, args.name)
     for path, why in result.unusable:
         print(f'not used: {path}: {why}', file=sys.stderr)
@@ -161,9 +159,8 @@ def run_calibration(args):
 
 
 def run_ground(args):
-    problem = output_problem(args.output)
-    if problem:
-        raise CalibrationError(f"cannot write '{args.output}': {problem}")
+    check_written(args, [(args.ground, '--ground picture'),
+                         (args.calibration, '--calibration file')])
     if args.board_ahead is None:
         raise CalibrationError('--ground needs --board-ahead D: how far the nearest row of inner '
                                "corners lies ahead of the robot's centre [m]")
@@ -214,6 +211,9 @@ def main(argv=None):
                         help='YAML to write (default: camera.yaml for --images, mounting.yaml '
                              'for --ground)')
     parser.add_argument('--name', default='camera', help="camera_name in the YAML")
+    parser.add_argument('--force', action='store_true',
+                        help='replace the -o file if it exists already (without it, an existing '
+                             'file is refused before anything runs)')
     args = parser.parse_args(argv)
     if args.images and args.ground:
         parser.error('give --images or --ground, not both')

@@ -45,7 +45,7 @@ import cv2
 
 from kobuki_lane import LaneFollower, LaneParams, make_controller
 from lanelib.camera import CAMERAS
-from lanelib.cli import check_output, fail
+from lanelib.cli import check_output, check_outputs_apart, fail
 from lanelib.mounting import MountingError, parse_pattern, read_mounting
 from lanelib.outputs import Outputs
 from lanelib.robot import ODOM_TOPIC
@@ -199,6 +199,9 @@ def build_parser():
                         help='write onboard (annotated) beside top-down view, .avi or .mp4')
     parser.add_argument('--time-limit', type=ranged(0, 1e5, open_low=True), metavar='S',
                         help='end the run here, above 0 (default: track length / 0.04 m/s + 30 s)')
+    parser.add_argument('--force', action='store_true',
+                        help='replace --json, --plot, --video and --chessboard files that exist '
+                             'already (without it, an existing file is refused before the run)')
     parser.add_argument('--continue', dest='keep_going', action='store_true',
                         help='drive on after a departure instead of ending the run')
     scene = parser.add_argument_group('scene and robot (override the track file)')
@@ -267,19 +270,23 @@ def build_parser():
 
 
 def check_outputs(args):
-    """Refuse, before the run, an output that is a folder or has a name its writer cannot use
-    (a --plot without an image extension failed in OpenCV after the whole run)."""
+    """Refuse, before the run, an output that is a folder, has a name its writer cannot use (a
+    --plot without an image extension failed in OpenCV after the whole run), is an input (the
+    --track or --mounting file) or exists already without --force (the node's rule)."""
     pictures = ('.png', '.jpg', '.jpeg', '.bmp')
     endings = {'--plot': pictures, '--chessboard': pictures, '--video': ('.avi', '.mp4')}
-    for path, what in ((args.json, '--json'), (args.plot, '--plot'), (args.video, '--video'),
-                       (args.chessboard, '--chessboard')):
-        if path:
-            check_output(PROG, path, what)
-            if os.path.isdir(path):
-                fail(PROG, f"{what} '{path}' is a folder; give a file name")
-            if what in endings and not path.lower().endswith(endings[what]):
-                fail(PROG, f"{what} '{path}': give a name ending in "
-                           f"{' or '.join(endings[what])}")
+    outputs = [(path, what) for path, what in ((args.json, '--json'), (args.plot, '--plot'),
+                                               (args.video, '--video'),
+                                               (args.chessboard, '--chessboard')) if path]
+    for path, what in outputs:
+        check_output(PROG, path, what)
+        if os.path.isdir(path):
+            fail(PROG, f"{what} '{path}' is a folder; give a file name")
+        if what in endings and not path.lower().endswith(endings[what]):
+            fail(PROG, f"{what} '{path}': give a name ending in "
+                       f"{' or '.join(endings[what])}")
+    inputs = [(args.track, '--track file'), (args.mounting, '--mounting file')]
+    check_outputs_apart(PROG, inputs, outputs, args.force)
 
 
 def customise(spec, args):

@@ -63,7 +63,7 @@ from lanelib.sim.tracks import LANE_TRACKS, load_track
 from lanelib.sim.world import FloorCamera, FloorMap
 from lanelib.sources import ListSource
 from lanelib.stages import Detection, slope_sum
-from tools.common import REPO, SAMPLES, machine, rss_mb, write_json
+from tools.common import REPO, SAMPLES, machine, rss_mb, whole_number, write_json
 
 OUT = os.path.join('out', 'bench')
 STAGES = ('undistort', 'gray', 'blur', 'canny', 'roi', 'hough', 'slopes')
@@ -468,14 +468,15 @@ def literal_dry_run(argv):
 def build_parser():
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('--sim-frames', type=int, default=300,
+    parser.add_argument('--sim-frames', type=whole_number(0), default=300,
                         help='simulator frames besides the 28 samples (default: 300)')
-    parser.add_argument('--repeats', type=int, default=3,
-                        help='times each frame is timed (default: 3)')
-    parser.add_argument('--video-frames', type=int, default=2000,
+    parser.add_argument('--repeats', type=whole_number(1), default=3,
+                        help='times each frame is timed, at least 1 (default: 3)')
+    parser.add_argument('--video-frames', type=whole_number(1), default=2000,
                         help='length of the throughput video (default: 2000)')
-    parser.add_argument('--soak', type=int, default=10000,
-                        help='frames of the memory run (default: 10000)')
+    parser.add_argument('--soak', type=whole_number(1000, why=' (RSS is compared with frame '
+                                                              '1,000)'), default=10000,
+                        help='frames of the memory run, at least 1,000 (default: 10000)')
     parser.add_argument('--quick', action='store_true',
                         help='60 simulator frames, 1 repeat, no throughput or memory runs')
     parser.add_argument('--json', metavar='FILE', help='write every figure as JSON')

@@ -33,3 +33,19 @@ def write_json(path, data):
     if path:
         with open(path, 'w', encoding='utf-8') as f:
             json.dump(data, f, indent=1)
+
+
+def whole_number(low, high=10 ** 9, why=''):
+    """An argparse type: a whole number from low to high; `why` says what needs the bound."""
+    import argparse
+
+    def parse(text):
+        try:
+            value = int(text)
+        except ValueError:
+            value = None
+        if value is None or not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"'{text}' is not a whole number from {low:,} to "
+                                             f'{high:,}{why}')
+        return value
+    return parse

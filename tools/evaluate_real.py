@@ -197,11 +197,34 @@ def frames_of(path):
     cap.release()
 
 
+COLUMNS = ('file', 'expected_steering', 'confidence', 'scene')
+STEERING = ('left', 'right', 'straight', 'no_lane')
+
+
+def read_labels(folder):
+    """The rows of folder/labels.csv; ValueError, saying which, for a column missing, a label
+    that is not one of STEERING, or a file that is not there."""
+    path = os.path.join(folder, 'labels.csv')
+    with open(path, encoding='utf-8', newline='') as f:
+        reader = csv.DictReader(f)
+        missing = [c for c in COLUMNS if c not in (reader.fieldnames or ())]
+        if missing:
+            raise ValueError(f"{path}: no column {', '.join(missing)} (it needs "
+                             f"{', '.join(COLUMNS)})")
+        rows = list(reader)
+    for line, row in enumerate(rows, start=2):
+        if row['expected_steering'] not in STEERING:
+            raise ValueError(f"{path} line {line}: expected_steering "
+                             f"'{row['expected_steering']}' is not one of {', '.join(STEERING)}")
+        if not os.path.isfile(os.path.join(folder, row['file'] or '')):
+            raise ValueError(f"{path} line {line}: '{row['file']}' is not a file in {folder}")
+    return rows
+
+
 def evaluate(folder, pictures=None):
     """Every labelled file decided three ways; with `pictures` (a folder), the improved
     controller's stages of each (of a video, its first frame read) as <file>.png there."""
-    with open(os.path.join(folder, 'labels.csv'), encoding='utf-8') as f:
-        rows = list(csv.DictReader(f))
+    rows = read_labels(folder)
     pitch = pitches(folder, rows)
     results = []
     for row in rows:
@@ -283,6 +306,10 @@ def main(argv=None):
         except OSError as e:
             fail(PROG, f"--pictures: cannot make '{args.pictures}': {e.strerror}")
         check_output(PROG, os.path.join(args.pictures, 'x.png'), '--pictures')
+    try:
+        read_labels(args.folder)
+    except (OSError, ValueError) as e:
+        fail(PROG, str(e))
     results, pitch = evaluate(args.folder, args.pictures)
     report(results, pitch, args.details)
     write_json(args.json, dict(cameras={s: dict(pitch_deg=round(p, 2), how=how)
