@@ -98,12 +98,14 @@ def test_the_node_takes_the_mounting_file_and_flags_override_it(wide_board, tmp_
     argv = ['--source', SAMPLES, '--dry-run', '--controller', 'improved', '--quiet']
     assert node_main([*argv, '--mounting', str(yaml), '--decisions', str(out)]) == 0
     assert len(read_jsonl(out)) == len(os.listdir(SAMPLES))
-    from kobuki_lane import build_parser, settings_from
+    from kobuki_lane import LaneParams, build_parser
+    from lanelib.node import settings_from
 
     def improved(*extra):
         args = build_parser().parse_args([*argv, '--mounting', str(yaml), *extra])
         params = dict(extra_params)
-        return settings_from(args, lambda name, default: params.get(name, default))[3]
+        return settings_from(args, lambda name, default: params.get(name, default),
+                             LaneParams)[3]
 
     extra_params = {}
     p = improved()
