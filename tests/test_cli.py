@@ -273,11 +273,11 @@ def test_progress_line_on_request():
 
 def test_controller_and_its_gains_from_private_params(tmp_path):
     out = tmp_path / 'd.jsonl'
-    assert main(['--source', SAMPLES, '--dry-run', '_controller:=improved', '_v_max:=0.2',
+    assert main(['--source', SAMPLES, '--dry-run', '_controller:=improved', '_v_max:=0.5',
                  '--decisions', str(out), '--quiet']) == 0
     records = read_jsonl(out)
     assert all('offset_m' in r for r in records)
-    assert max(r['linear_x'] for r in records) <= 0.2
+    assert max(r['linear_x'] for r in records) <= 0.5 * 0.35 + 1e-9  # [lane widths/s]
     proc = cli('--source', SAMPLES, '--dry-run', '_controller:=clever')
     assert proc.returncode == 2 and 'controller must be lecture or improved' in proc.stderr
 
@@ -573,7 +573,8 @@ def test_a_setting_above_the_kobukis_limits_is_warned_of_and_what_was_sent_recor
     proc = cli('--source', SAMPLES, '--dry-run', '--quiet', '--controller', 'improved',
                '--v-max', '5', '--decisions', str(out))
     assert proc.returncode == 0
-    assert "v_max = 5 m/s is above the Kobuki's 0.70 m/s: commands are clipped" in proc.stderr
+    assert ("v_max = 1.75 m/s (5 lane widths/s) is above the Kobuki's 0.70 m/s: commands are "
+            'clipped' in proc.stderr)
     records = read_jsonl(out)
     assert max(r['linear_x'] for r in records) == pytest.approx(0.7)
 

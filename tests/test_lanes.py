@@ -296,7 +296,8 @@ def test_the_controller_reads_a_rendered_duckietown_lane():
                              (0.02 - DT.lane_width / 2, 0.05, WHITE)):
         image[painted([(y, width)]) > 0] = colour
     p = ImprovedParams(lane='duckietown', camera_height=0.10, camera_pitch=20.0,
-                       camera_forward=0.0, roi_near=0.12, roi_far=0.8, memory=0.0)
+                       camera_forward=0.0, roi_near=0.12 / 0.2375, roi_far=0.8 / 0.2375,
+                       memory=0.0)
     from lanelib.camera import Camera
     camera = Camera('pinhole', K, np.zeros(5), (640, 480))
     ctl = ImprovedController(LaneParams(), p, camera)

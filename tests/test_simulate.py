@@ -14,8 +14,10 @@ import simulate
 from kobuki_lane import LaneParams, make_controller
 from kobuki_lane import main as node_main
 from lanelib.camera import LECTURE_CAMERA
+from lanelib.estimate import LaneEstimate, measure
 from lanelib.geometry import Mounting, camera_axes
-from lanelib.improved import ImprovedParams, LaneEstimate, LaneMemory, measure_lane
+from lanelib.improved import ImprovedParams
+from lanelib.memory import LaneMemory
 from lanelib.robot import ODOM_TOPIC, STOP, arc_step
 from lanelib.rospy_standin import Odometry as OdometryMessage
 from lanelib.rospy_standin import SimClock, StandInRospy
@@ -109,7 +111,7 @@ def test_offset_and_heading_at_known_poses(straight_scene, offset, yaw_deg):
     img = camera.render(floor_map, track.pose_at(1.0, offset, math.radians(yaw_deg)),
                         Scene(noise=3), np.random.default_rng(1))
     ctl = make_controller('improved', LaneParams())
-    est, _ = measure_lane(ctl.perceive(img).pieces, ctl.profile, ctl.p)
+    est, _ = measure(ctl.perceive(img).pieces, ctl.profile, ctl.p)
     assert est.left >= 1 and est.right >= 1
     assert est.offset == pytest.approx(offset, abs=0.02)
     assert math.degrees(est.heading) == pytest.approx(yaw_deg, abs=2.0)
@@ -121,7 +123,7 @@ def test_one_line_is_enough(straight_scene):
     gone = FloorMap(track, gaps=[dict(line='right', at=0.0, length=8.0)])
     img = camera.render(gone, track.pose_at(1.0, 0.03, 0.0), Scene(noise=0))
     ctl = make_controller('improved', LaneParams())
-    est, _ = measure_lane(ctl.perceive(img).pieces, ctl.profile, ctl.p)
+    est, _ = measure(ctl.perceive(img).pieces, ctl.profile, ctl.p)
     assert est.right == 0 and est.left >= 1
     assert est.offset == pytest.approx(0.03, abs=0.02)
     assert est.confidence < 1.0
@@ -359,7 +361,8 @@ def test_lane_memory_holds_the_line_into_a_tight_bend():
     with_memory = simulate.run(from_dict(dict(spec), 'bend'), 'improved')
     assert with_memory['completed'] and with_memory['max_offset_m'] < 0.03
     def without(name, spec, params):
-        improved = replace(improved_params(spec), memory=0.0, roi_far=2.0, curve_slowdown=0.8)
+        improved = replace(improved_params(spec), memory=0.0, roi_far=2.0 / 0.35,
+                           curve_slowdown=0.8 / 0.35)
         return make_controller(name, params, LECTURE_CAMERA, improved)
 
     without_memory = simulate.run(from_dict(dict(spec), 'bend'), 'improved',
@@ -493,7 +496,7 @@ def test_the_node_runs_the_improved_controller(tmp_path):
     assert node_main(['--source', SAMPLES, '--dry-run', '--controller', 'improved',
                       '--decisions', str(out), '--quiet']) == 0
     records = [json.loads(line) for line in out.read_text().splitlines()]
-    p = ImprovedParams()
+    p = ImprovedParams().in_metres(0.35)
     for r in records:
         assert {'offset_m', 'heading_rad', 'confidence'} <= set(r)
         assert r['decision'] in ('left', 'right', 'straight')
@@ -546,7 +549,7 @@ def test_soak_with_frequent_faults_never_moves_while_blind():
     assert result['moving_while_camera_out'] == 0
     # covered: after lost_timeout only the remembered lane is driven (it reaches 1.2 m at
     # most), then the robot turns in place, never forward again, within the search angle
-    assert result['blind_forward_m'] <= ImprovedParams().roi_far
+    assert result['blind_forward_m'] <= ImprovedParams().in_metres(0.35).roi_far
     assert result['forward_after_search'] == 0
     assert result['search_turn_deg'] <= ImprovedParams().search_angle + 8.0
     assert result['watchdog_stops'] > 0

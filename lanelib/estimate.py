@@ -1,0 +1,100 @@
+"""The lane estimate: where the robot's lane is, frame after frame, as predict and update.
+
+    measure   one frame: among all the pieces of line in view, the robot's own lane
+              (lanelib/lanefit.py: the lane whose two lines the pieces best support, with the
+              colours allowed on each side), as an arc through the robot; None when too
+              little of it is seen, or the robot would be more than half a lane outside it
+    predict   the last estimate moved with the robot's motion since (and a little less sure)
+    blend     the prediction and the measurement weighed by the measurement's confidence
+
+The estimate is the centre line as y = a + b x + c x^2 about the robot (x ahead, y left): its
+offset (-a), heading (-atan b) and curvature (2c at the robot), and how sure of it (0..1).
+"""
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from lanelib.lanefit import LaneFit, find_lane
+
+MIN_SEEN = 0.25  # [lane widths] of the lane's lines: less is no lane (a scrap, a glint)
+FULL_VIEW = 2.9  # [lane widths] of line seen counts as a full view (confidence 1)
+ONE_LINE = 0.7  # how sure one line alone makes the estimate, against both
+FORGET = 0.8  # how much of its confidence a prediction keeps, per frame
+TURNED = math.radians(80)  # a lane predicted to run more than this across the view is lost
+
+
+@dataclass
+class LaneEstimate:
+    a: float  # centre line y at x = 0 [m]
+    b: float  # slope of the centre line at x = 0
+    c: float  # half its curvature [1/m]
+    confidence: float  # 0..1
+    left: int = 0  # pieces on the left line
+    right: int = 0  # pieces on the right line
+    reach: float = 1.0  # [m] mean distance ahead of the points the fit rests on
+    points: tuple = None  # the centre-line points the fit rests on: x, y, weight (robot frame)
+    width: float = None  # [m] between the lines, as measured
+
+    @property
+    def offset(self):  # robot left of the lane centre [m]
+        return -self.a
+
+    @property
+    def heading(self):  # robot turned left of the lane direction [rad]
+        return -math.atan(self.b)
+
+    @property
+    def curvature(self):  # the lane bends left [1/m]
+        return 2 * self.c / (1 + self.b ** 2) ** 1.5
+
+    @property
+    def arc(self):  # (e, psi, k) of the arc it starts as, lanefit's shape
+        return self.a, math.atan(self.b), self.curvature
+
+    def point_at(self, distance):
+        """(x, y, heading) of the centre line `distance` [m] from the robot, following it as
+        the arc it starts as (a polynomial in x cannot turn 90 degrees)."""
+        return LaneFit(self.arc, None, 0, 0, None).point_at(distance)
+
+    def lateral_at(self, distance):
+        """How far to the left [m] the centre line lies `distance` metres from the robot."""
+        return self.point_at(distance)[1]
+
+
+def measure(pieces, profile, p, prior=None, anchor=None):
+    """One frame's LaneEstimate from pieces of line with their colours, or None (module doc);
+    and the lanefit.LaneFit it rests on (or None). p: ImprovedParams in metres; prior: the
+    arc (e, psi, k) of the lane expected; anchor: (offset, heading) of the lane expected at
+    the robot, if known better than the prior's (lanefit.find_lane)."""
+    fit = find_lane(pieces, profile, p.lane_width, prior, width_tolerance=p.width_tolerance,
+                    anchor=anchor)
+    if fit is None or fit.left + fit.right < MIN_SEEN * p.lane_width or abs(fit.e) > fit.width:
+        return None, fit
+    b = math.tan(fit.psi)
+    confidence = (min(1.0, (fit.left + fit.right) / (FULL_VIEW * p.lane_width)) *
+                  (1.0 if fit.left and fit.right else ONE_LINE))
+    cx, _, cw = fit.centre
+    return LaneEstimate(fit.e, b, fit.k * (1 + b * b) ** 1.5 / 2, confidence,
+                        int(np.sum(fit.sides == 1)), int(np.sum(fit.sides == -1)),
+                        float(np.average(cx, weights=cw)), fit.centre, fit.width), fit
+
+
+def predict(est, ds, dtheta):
+    """The centre line as seen after the robot drove `ds` [m] and turned `dtheta` [rad], or
+    None when it would run across the robot's view (more than TURNED from its heading: a
+    polynomial in x cannot say where such a lane goes, and predicted on it goes to infinity)."""
+    a = est.a + est.b * ds + est.c * ds ** 2
+    b = est.b + 2 * est.c * ds - dtheta * (1 + est.b ** 2)
+    if not (math.isfinite(a) and math.isfinite(b) and abs(b) < math.tan(TURNED)):
+        return None
+    return replace(est, a=a, b=b, confidence=est.confidence * FORGET)
+
+
+def blend(pred, meas, weight):
+    """The prediction moved `weight` (0..1) of the way to the measurement."""
+    return LaneEstimate(pred.a + weight * (meas.a - pred.a), pred.b + weight * (meas.b - pred.b),
+                        pred.c + weight * (meas.c - pred.c),
+                        pred.confidence + weight * (meas.confidence - pred.confidence),
+                        meas.left, meas.right, meas.reach, width=meas.width)

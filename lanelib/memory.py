@@ -1,0 +1,130 @@
+"""The lane memory: the centre line as seen in the last `seconds`, kept in the frame the robot
+started in and moved with its motion (odometry while it comes, else the commands sent).
+
+A camera looking ahead sees the floor from some way in front of the robot (the lecture's level
+webcam from 0.6 m): the lane between the robot and there is known only from earlier frames.
+The estimate (lanelib/estimate.py) fits one arc to what is in view; the memory keeps the lane's
+shape as it was seen, so that a bend's entry, an S-bend's turn the other way, or a U-turn the
+camera has lost sight of, are steered on as they are:
+
+    centre_line(near, far)   the remembered centre line between near and far metres ahead, as
+                             y = a + b x + c x^2: where the lane lies about the robot (the
+                             estimate's anchor) and at the look-ahead (what the robot steers at)
+    arc(start)               the remembered centre line within a metre, as an arc through the
+                             robot: it can turn any angle (what the robot follows when the lane
+                             is out of view)
+"""
+
+import math
+
+import numpy as np
+
+from lanelib.lanefit import fit_lanes, signed_distance
+from lanelib.robot import arc_step
+
+ENOUGH = 6  # points: fewer remembered in a stretch say nothing of it
+
+
+class LaneMemory:
+    """Centre-line points (x, y, weight) of the last `seconds` of frames, in the start frame."""
+
+    def __init__(self, seconds):
+        self.seconds = seconds
+        self.pose = np.zeros(3)  # x, y, yaw of the robot in the start frame
+        self.t = 0.0
+        self.chunks = []  # (time, X, Y, weight)
+        self._local = None  # local()'s answer until the robot moves or points come or go
+
+    def move(self, v, omega, dt):
+        """Dead reckoning: `dt` seconds at (v [m/s], omega [rad/s])."""
+        self._moved_to(np.array(arc_step(*self.pose, v, omega, dt)), dt)
+
+    def move_by(self, ahead, left, turned, dt):
+        """The robot moved `ahead` and `left` [m] and turned `turned` [rad] (in its frame before
+        the move) in `dt` seconds: from odometry."""
+        px, py, yaw = self.pose
+        c, s = math.cos(yaw), math.sin(yaw)
+        self._moved_to(np.array([px + c * ahead - s * left, py + s * ahead + c * left,
+                                 yaw + turned]), dt)
+
+    def _moved_to(self, pose, dt):
+        """The robot is at `pose` `dt` seconds later: points older than `seconds` are gone."""
+        self.pose = pose
+        self.t += dt
+        self.chunks = [c for c in self.chunks if self.t - c[0] <= self.seconds]
+        self._local = None
+
+    def add(self, x, y, w):
+        """Centre-line points seen now (robot frame)."""
+        px, py, yaw = self.pose
+        cos, sin = math.cos(yaw), math.sin(yaw)
+        self.chunks.append((self.t, px + cos * x - sin * y, py + sin * x + cos * y, w))
+        self._local = None
+
+    def local(self):
+        """All remembered points in the robot's frame now: x, y, weight (worked out once per
+        pose and set of points: a frame asks for them up to three times)."""
+        if self._local is None:
+            if not self.chunks:
+                return np.empty(0), np.empty(0), np.empty(0)
+            px, py, yaw = self.pose
+            X = np.concatenate([c[1] for c in self.chunks]) - px
+            Y = np.concatenate([c[2] for c in self.chunks]) - py
+            w = np.concatenate([c[3] for c in self.chunks])
+            cos, sin = math.cos(yaw), math.sin(yaw)
+            self._local = (cos * X + sin * Y, -sin * X + cos * Y, w)
+        return self._local
+
+    def clear(self):
+        self.chunks = []
+        self._local = None
+
+    def centre_line(self, near, far, min_span, outlier=None):
+        """(a, b, c) of the remembered centre line fitted between near and far metres ahead,
+        or None with fewer than ENOUGH points there or spanning less than min_span. With
+        `outlier` [m], two more rounds drop the points that far off the fit (points sorted to
+        the wrong line, a lane width off)."""
+        x, y, w = self.local()
+        keep = (x > near) & (x < far)
+        if np.count_nonzero(keep) < ENOUGH or np.ptp(x[keep]) < min_span:
+            return None
+        x, y, w, middle = x[keep], y[keep], w[keep], (near + far) / 2
+        coef = fit_centre(x, y, w, x0=middle)
+        for _ in range(2 if outlier else 0):
+            keep = np.abs(y - (coef[0] + coef[1] * x + coef[2] * x ** 2)) < outlier
+            if np.count_nonzero(keep) < ENOUGH:
+                break
+            coef = fit_centre(x[keep], y[keep], w[keep], x0=middle)
+        return coef
+
+    def arc(self, start, reach, outlier):
+        """The remembered centre line within `reach` metres of the robot as an arc (e, psi, k)
+        through the robot, refined from `start` (e, psi, k), dropping points `outlier` metres
+        off it; and the points it rests on (x, y); None with fewer than ENOUGH points."""
+        x, y, w = self.local()
+        keep = np.hypot(x, y) < reach
+        if np.count_nonzero(keep) < ENOUGH:
+            return None
+        x, y, w = x[keep], y[keep], w[keep]
+        arc = np.array([[*start, 0.0]], float)
+        hold = ([1e-6 * w.sum()] * 3 + [0.0], [0.0] * 4)
+        for _ in range(3):
+            arc = fit_lanes(x, y, np.zeros((1, len(x))), w[None, :], arc, hold, (0.0, 0.0),
+                            iterations=6)
+            near = np.abs(signed_distance(x, y, *arc[0, :3])) < outlier
+            if np.count_nonzero(near) < ENOUGH:
+                return None
+            x, y, w = x[near], y[near], w[near]
+        return tuple(float(v) for v in arc[0, :3]), (x, y)
+
+
+def fit_centre(x, y, w, ridge=0.05, x0=0.0):
+    """Weighted least squares y = a + b x + c x^2, with c pulled towards 0 on short spans.
+    The pull acts on the curve written about x0 (put x0 amid the points): there a and b are
+    what the points say, whatever becomes of c (written about 0, pulling c on a short span far
+    ahead would tilt the line instead of bending it)."""
+    u = x - x0
+    A = np.stack([np.ones_like(u), u, u ** 2], axis=1) * np.sqrt(w)[:, None]
+    reg = np.diag([0.0, 1e-4, ridge]) * w.sum()
+    a, b, c = np.linalg.solve(A.T @ A + reg, A.T @ (y * np.sqrt(w)))
+    return float(a - b * x0 + c * x0 ** 2), float(b - 2 * c * x0), float(c)

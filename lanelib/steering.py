@@ -1,0 +1,47 @@
+"""The improved controller's steering law: one function from a point of the lane to a Twist.
+
+The robot steers at a point of the centre line x [m] ahead and y [m] to its left, where the line
+has slope dy/dx. The commanded path curvature is
+
+    k_cmd = alpha * 2 y / x^2 + (1 - alpha) * slope / x
+
+On a circle of radius R both terms are 1/R (to first order in x / R), so there is no steady-state
+error. With offset e [m, + left of centre] and heading h [rad, + turned left], y ~ -e - x h +
+x^2 / 2R and slope ~ -h + x / R, so this is PD on offset (gain 2 alpha / x^2) and heading
+((1 + alpha) / x) with curvature feed-forward; alpha = 1 is pure pursuit, alpha = 3 (damping
+ratio 0.82) closes in on the centre line about 1.7 times faster per metre.
+
+Written exactly for the circle through the robot (2 y / (x^2 + y^2), and the heading over the
+arc's length) it measured better on gentle bends (the oval's: 0.3 cm RMS against 1.4) and far
+worse on Duckietown's tight corners, where the robot ran wide and left the lane in 11 of 12
+episodes of its simulator (with this law, 0 of 4): the estimate of a bend seen briefly is
+straighter than the bend, and this law's over-steer on bends is what makes up for it.
+
+Speed: v_max, divided by (1 + curve_slowdown |k_cmd|) on bends, times (0.5 + 0.5 confidence),
+never below v_min; angular.z = v k_cmd within omega_max.
+"""
+
+import numpy as np
+
+
+def curvature(x, y, slope, alpha):
+    """k_cmd [1/m] towards the point (x, y) [m] where the centre line has `slope` (module doc);
+    0 for a point not ahead."""
+    if x <= 1e-9:
+        return 0.0
+    return alpha * 2.0 * y / (x * x) + (1.0 - alpha) * slope / x
+
+
+def command(k_cmd, confidence, p):
+    """(linear.x [m/s], angular.z [rad/s]) for a commanded curvature [1/m] and the estimate's
+    confidence (0..1); p: ImprovedParams in metres (module doc)."""
+    v = p.v_max / (1.0 + p.curve_slowdown * abs(k_cmd)) * (0.5 + 0.5 * confidence)
+    v = float(np.clip(v, p.v_min, p.v_max))
+    return v, float(np.clip(v * k_cmd, -p.omega_max, p.omega_max))
+
+
+def steer(x, y, slope, confidence, p, alpha=None):
+    """(linear.x, angular.z) at the point (x, y) of the centre line with `slope` there, the
+    law's alpha p.lateral_gain unless given (1: pure pursuit)."""
+    return command(curvature(x, y, slope, p.lateral_gain if alpha is None else alpha),
+                   confidence, p)

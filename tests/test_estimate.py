@@ -1,0 +1,150 @@
+"""The improved controller's estimate, memory and steering law on synthetic pieces of line with
+known answers (lanelib/estimate.py, lanelib/memory.py, lanelib/steering.py). lanefit's search
+for the lane among the lines has its own tests in test_lanes.py."""
+
+import math
+
+import numpy as np
+import pytest
+
+from lanelib.colour import Piece
+from lanelib.estimate import LaneEstimate, blend, measure, predict
+from lanelib.improved import ImprovedParams
+from lanelib.lanes import BUILTIN
+from lanelib.memory import LaneMemory
+from lanelib.robot import arc_step
+from lanelib.steering import command, curvature, steer
+
+DT = BUILTIN['duckietown']
+P = ImprovedParams(lane='duckietown').in_metres(DT.lane_width)
+
+
+def line_pieces(y, colour, along=(0.15, 0.8), step=0.1, dashed=False):
+    """Pieces of a straight line at lateral y [m], along x from along[0] to along[1]."""
+    pieces = []
+    for i, s0 in enumerate(np.arange(along[0], along[1], step)):
+        if dashed and i % 2:
+            continue
+        x = np.linspace(s0, s0 + step, 20)
+        pieces.append(Piece(x, np.full_like(x, y), 0.0, colour, step, 0.03))
+    return pieces
+
+
+# ---------------------------------------------------------------- measure
+
+def test_two_lines_are_the_lane_where_it_is_and_sure():
+    half = DT.lane_width / 2
+    est, fit = measure(line_pieces(0.03 + half, 'yellow', dashed=True) +
+                       line_pieces(0.03 - half, 'white'), DT, P)
+    assert est.offset == pytest.approx(-0.03, abs=0.005) and abs(est.heading) < 0.01
+    assert est.left and est.right and est.confidence == 1.0
+    assert est.width == pytest.approx(DT.lane_width, abs=0.005)
+
+
+def test_one_line_places_the_lane_half_a_width_beside_it_less_sure():
+    est, _ = measure(line_pieces(-0.08, 'white'), DT, P)
+    assert est.offset == pytest.approx(0.08 - DT.lane_width / 2, abs=0.005)
+    assert est.right and not est.left and est.confidence == pytest.approx(
+        min(1.0, 0.7 / (2.9 * DT.lane_width)) * 0.7, rel=0.05)
+
+
+def test_a_neighbours_lane_is_not_the_robots():
+    w = DT.lane_width
+    own = line_pieces(w / 2, 'yellow', dashed=True) + line_pieces(-w / 2, 'white')
+    est, fit = measure(own + line_pieces(1.5 * w, 'white'), DT, P)
+    assert abs(est.offset) < 0.01 and list(fit.sides[len(own):]) == [0] * 7
+
+
+def test_no_line_or_a_scrap_is_no_lane():
+    assert measure([], DT, P) == (None, None)
+    scrap = line_pieces(0.05, 'white', along=(0.5, 0.52), step=0.03)
+    assert measure(scrap, DT, P)[0] is None  # 3 cm: less than a quarter lane width
+
+
+def test_a_lane_the_robot_would_be_far_outside_is_not_its_own():
+    est, _ = measure(line_pieces(1.2, 'white') + line_pieces(0.95, 'yellow'), DT, P)
+    assert est is None
+
+
+# ---------------------------------------------------------------- predict and blend
+
+def test_predict_moves_the_lane_with_the_robot():
+    straight = LaneEstimate(0.05, 0.0, 0.0, 1.0)
+    turned = predict(straight, 0.2, math.radians(10))  # 20 cm on, turned 10 degrees left
+    assert turned.a == pytest.approx(0.05)  # parallel lane: the offset stays
+    assert math.degrees(turned.heading) == pytest.approx(10, abs=0.5)  # the lane to the right
+    bend = LaneEstimate(0.0, 0.0, 0.5, 1.0)  # curvature 1 / m to the left
+    ahead = predict(bend, 0.2, 0.0)
+    assert ahead.a == pytest.approx(0.5 * 0.2 ** 2) and ahead.b == pytest.approx(0.2)
+    assert turned.confidence == pytest.approx(0.8)  # a prediction is less sure
+
+
+def test_blend_weighs_the_measurement_by_its_weight():
+    pred, meas = LaneEstimate(0.0, 0.0, 0.0, 0.5), LaneEstimate(0.1, 0.2, 0.3, 1.0)
+    assert blend(pred, meas, 0.0).a == 0.0
+    half = blend(pred, meas, 0.5)
+    assert (half.a, half.b, half.c, half.confidence) == pytest.approx((0.05, 0.1, 0.15, 0.75))
+    assert blend(pred, meas, 1.0).b == pytest.approx(0.2)
+
+
+# ---------------------------------------------------------------- the memory
+
+def test_the_memory_keeps_points_where_they_are_on_the_floor():
+    memory = LaneMemory(10.0)
+    seen = np.array([1.0, 1.2, 1.4]), np.array([0.1, 0.0, -0.1])
+    memory.add(*seen, np.ones(3))
+    pose = (0.0, 0.0, 0.0)
+    for v, omega in [(0.2, 0.0), (0.2, 0.4), (0.1, -0.6), (0.0, 0.5)]:
+        memory.move(v, omega, 0.25)
+        pose = arc_step(*pose, v, omega, 0.25)
+    x, y, _ = memory.local()
+    dx, dy = seen[0] - pose[0], seen[1] - pose[1]
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    assert np.allclose(x, c * dx + s * dy, atol=1e-9)
+    assert np.allclose(y, -s * dx + c * dy, atol=1e-9)
+    memory.move(0.0, 0.0, 10.0)  # older than `seconds`: forgotten
+    assert memory.local()[0].size == 0
+
+
+def test_the_memory_fits_the_centre_line_ahead_and_an_arc_round_a_u_turn():
+    memory = LaneMemory(10.0)
+    r = 0.5
+    s = np.linspace(0.0, 0.5, 30)  # from the robot into a bend to the left
+    memory.add(r * np.sin(s / r), r * (1 - np.cos(s / r)), np.ones_like(s))
+    a, b, c = memory.centre_line(0.1, 0.3, 0.1)
+    assert a + b * 0.2 + c * 0.04 == pytest.approx(r - math.sqrt(r * r - 0.04), abs=0.005)
+    s = np.linspace(0.5, 1.5, 60)  # and on round a U-turn
+    memory.add(r * np.sin(s / r), r * (1 - np.cos(s / r)), np.ones_like(s))
+    arc, _ = memory.arc((0.0, 0.0, 1.5), 1.0, 0.06)  # from the bend as estimated
+    assert arc[2] == pytest.approx(1 / r, rel=0.05) and abs(arc[0]) < 0.01
+    assert memory.centre_line(2.0, 3.0, 0.1) is None  # nothing remembered there
+
+
+# ---------------------------------------------------------------- the steering law
+
+@pytest.mark.parametrize('alpha', [1.0, 3.0])
+@pytest.mark.parametrize('radius', [1.0, -1.5, 3.0])
+def test_on_a_circle_the_law_commands_its_curvature(radius, alpha):
+    # the robot on the centre line of a bend, looking a little way ahead: both terms 1/R
+    x = 0.1 * abs(radius)
+    y = radius - math.copysign(math.sqrt(radius * radius - x * x), radius)
+    slope = x / math.copysign(math.sqrt(radius * radius - x * x), radius)
+    assert curvature(x, y, slope, alpha) == pytest.approx(1 / radius, rel=0.02)
+
+
+def test_alpha_1_is_pure_pursuit_and_alpha_weighs_the_offset():
+    assert curvature(0.8, 0.1, 5.0, 1.0) == pytest.approx(2 * 0.1 / 0.8 ** 2)
+    # parallel and 10 cm to the left: alpha 3 turns three times as hard as pure pursuit
+    assert curvature(0.8, 0.1, 0.0, 3.0) == pytest.approx(3 * curvature(0.8, 0.1, 0.0, 1.0))
+    assert curvature(0.0, 0.1, 0.0, 3.0) == 0.0  # a point not ahead: no turn
+
+
+def test_speed_and_turn_rate_are_bounded():
+    p = ImprovedParams(omega_max=0.5).in_metres(0.35)
+    v, omega = command(0.0, 1.0, p)
+    assert (v, omega) == (pytest.approx(p.v_max), 0.0)
+    assert command(0.0, 0.0, p)[0] == pytest.approx(0.5 * p.v_max)  # unsure: half speed
+    v, omega = command(100.0, 1.0, p)
+    assert v == pytest.approx(p.v_min) and omega == 0.5  # never below v_min, saturated
+    assert command(-100.0, 1.0, p)[1] == -0.5
+    assert steer(0.8, 0.1, 0.0, 1.0, p) == command(curvature(0.8, 0.1, 0.0, 3.0), 1.0, p)
