@@ -367,10 +367,18 @@ def build_parser():
                          "image pattern like 'frames/%%04d.png', URL, ROS 1 bag, or a live "
                          "image topic 'ros:/camera/rgb/image_raw' (a topic ending in "
                          '/compressed is CompressedImage) (default: 0)')
-    io.add_argument('--calibration', default='lecture',
+    io.add_argument('--robot', metavar='NAME|FILE',
+                    help="a robot preset: 'kobuki' (default: the lecture's Kobuki and webcam, "
+                         "the tables' defaults), 'duckiebot' (a DB21 on a Duckietown track) or "
+                         'a YAML file of settings by their names below; it sets the camera, its '
+                         'mounting, the lane, the rate, whatever differs (config/*.yaml); flags '
+                         'and private parameters outrank it (lanelib/robots.py)')
+    io.add_argument('--calibration',
                     help="'lecture' (the lecture's camera matrix, default), 'duckiebot' "
-                         "(Duckietown's default camera), 'none', a ROS camera_info YAML path, "
-                         "or 'topic': the camera_info beside the --source ros: topic")
+                         "(Duckietown's default camera; 'duckiebot-rectified' for its frames "
+                         "rectified already), 'none', a ROS camera_info YAML path, or 'topic': "
+                         "the camera_info beside the --source ros: topic (default: the robot "
+                         "preset's, else lecture)")
     io.add_argument('--mounting', metavar='FILE',
                     help="the improved controller's camera mounting (height, pitch_deg, "
                          'roll_deg, forward), as calibration.py --ground writes it; '

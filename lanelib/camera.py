@@ -65,7 +65,11 @@ DUCKIEBOT_CAMERA = Camera(
                          0.001308569367976665, 0.0]),
     image_size=(640, 480),
 )
-CAMERAS = {'lecture': LECTURE_CAMERA, 'duckiebot': DUCKIEBOT_CAMERA}
+CAMERAS = {'lecture': LECTURE_CAMERA, 'duckiebot': DUCKIEBOT_CAMERA,
+           # its frames rectified already (dt-core's image_rect, duckietown-lx's *_rect):
+           # the same camera matrix, nothing left to undistort
+           'duckiebot-rectified': Camera('duckiebot-rectified', DUCKIEBOT_CAMERA.matrix,
+                                         np.zeros(5), DUCKIEBOT_CAMERA.image_size)}
 
 
 def undistortion_maps(camera, width, height):
@@ -81,8 +85,8 @@ def undistortion_maps(camera, width, height):
 
 
 def load_calibration(spec):
-    """'lecture' -> LECTURE_CAMERA, 'duckiebot' -> DUCKIEBOT_CAMERA, 'none' -> None,
-    anything else -> a camera_info YAML path."""
+    """A name in CAMERAS (lecture, duckiebot, duckiebot-rectified), 'none' -> None, anything
+    else -> a camera_info YAML path."""
     if spec in CAMERAS:
         return CAMERAS[spec]
     if spec == 'none':

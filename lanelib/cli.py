@@ -69,15 +69,23 @@ def check_outputs_apart(prog, inputs, outputs, force, stages=None):
                        'read as frames')
 
 
+def calibration_problem(calibration, source):
+    """Why `calibration` cannot be used with --source `source`, or None."""
+    if calibration == 'topic' and topic_of(source) is None:
+        return (f"--calibration topic reads the camera_info beside a ROS image topic, and "
+                f"--source '{source}' is not one: give --source ros:TOPIC (e.g. "
+                'ros:/camera/rgb/image_raw), or --calibration lecture, none or a FILE')
+    return None
+
+
 def check_arguments(prog, args):
     """Everything about the arguments that can be checked before anything is opened."""
     topic = topic_of(args.source)
     if topic is not None and topic_problem(topic):
         fail(prog, topic_problem(topic))
-    if args.calibration == 'topic' and topic is None:
-        fail(prog, f"--calibration topic reads the camera_info beside a ROS image topic, and "
-                   f"--source '{args.source}' is not one: give --source ros:TOPIC (e.g. "
-                   'ros:/camera/rgb/image_raw), or --calibration lecture, none or a FILE')
+    problem = calibration_problem(args.calibration, args.source)
+    if problem:
+        fail(prog, problem)
     if args.stages:  # a folder that exists, or one to make in a folder that does
         if os.path.exists(args.stages) and not os.path.isdir(args.stages):
             fail(prog, f"--stages '{args.stages}': not a folder")

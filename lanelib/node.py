@@ -16,11 +16,12 @@ import time
 from dataclasses import fields
 
 from lanelib.camera import describe, load_calibration
-from lanelib.cli import fail
+from lanelib.cli import calibration_problem, fail
 from lanelib.improved import ImprovedParams
 from lanelib.mounting import mounting_settings
 from lanelib.outputs import Outputs, Progress, VideoSink, summary
 from lanelib.robot import VELOCITY_TOPIC
+from lanelib.robots import DEFAULT, load_robot
 from lanelib.ros import MasterWatch, RosUnavailable, connect, debug_publisher, private_names
 from lanelib.safety import Safety, say
 from lanelib.settings import resolve, unknown
@@ -32,21 +33,32 @@ EXIT_STATUS = {'end of input': 0, 'ROS shutdown': 0, 'q pressed': 0, 'camera los
 
 
 IMPROVED_ONLY = tuple(f.name for f in fields(ImprovedParams)) + ('mounting', 'odom')
+OTHER_PARAMETERS = ('controller', 'robot', 'calibration', 'mounting', 'odom')  # in no table
 
 
 def settings_from(args, get_param, lecture, warn=None):
-    """The tables (`lecture`: the lecture's, kobuki_lane.LaneParams) and the controller's name:
-    flag > private ROS parameter > default. The
-    improved controller's flags with the lecture's controller are refused (they would be
-    ignored without a word), its private parameters said to be ignored."""
-    params = resolve(lecture, args, get_param)
-    safety = resolve(Safety, args, get_param)
+    """(params, safety, controller name, improved params, robot): the tables (`lecture`: the
+    lecture's, kobuki_lane.LaneParams) from a flag > a private ROS parameter > the --mounting
+    file > the robot preset (--robot, lanelib/robots.py) > the tables' defaults; and
+    args.calibration set the same way (default lecture). The improved controller's flags with
+    the lecture's controller are refused (they would be ignored without a word), its private
+    parameters said to be ignored; a preset may hold them (a robot's camera is the same under
+    either controller)."""
+    known = {f.name for table in (lecture, ImprovedParams, Safety) for f in fields(table)}
+    robot = load_robot(args.robot or str(get_param('~robot', DEFAULT)), known)
+    preset = (robot.settings, f"the robot preset '{robot.name}' ({robot.path})")
+    params = resolve(lecture, args, get_param, [preset])
+    safety = resolve(Safety, args, get_param, [preset])
     name = args.controller or str(get_param('~controller', 'lecture'))
+    args.calibration = str(args.calibration or get_param('~calibration', None) or
+                           robot.settings.get('calibration', 'lecture'))
     improved = None
     if name == 'improved':
-        mounting = args.mounting or get_param('~mounting', '')
-        improved = resolve(ImprovedParams, args, get_param, mounting_settings(mounting),
-                           f"the mounting file '{mounting}'")
+        mounting = (args.mounting or get_param('~mounting', '') or
+                    robot.settings.get('mounting', ''))
+        improved = resolve(ImprovedParams, args, get_param,
+                           [(mounting_settings(mounting), f"the mounting file '{mounting}'"),
+                            preset])
     else:
         flags = ['--' + n.replace('_', '-') for n in IMPROVED_ONLY if getattr(args, n) is not None]
         if flags:
@@ -63,7 +75,7 @@ def settings_from(args, get_param, lecture, warn=None):
         raise ValueError(f'rate {params.rate:g} Hz sends a command every {1 / params.rate:.2f} s, '
                          f'but the watchdog stops the robot after {safety.watchdog:g} s without '
                          'one: raise the rate or the watchdog')
-    return params, safety, name, improved
+    return params, safety, name, improved, robot
 
 
 def open_outputs(prog, args, params, ros, source, controller):
@@ -109,21 +121,28 @@ def set_up(prog, args, ros, topic_ros, lecture, make_controller):
     pipeline, odometry): kobuki_lane's. Exit 2 for what cannot be used."""
     topic = topic_of(args.source)
     for unknown_name, guess in unknown(private_names(ros), (lecture, ImprovedParams, Safety),
-                                       ('controller', 'mounting', 'odom')):
+                                       OTHER_PARAMETERS):
         ros.logwarn('unknown private parameter ~%s, ignored%s', unknown_name,
                     f' (did you mean ~{guess}?)' if guess else '')
     try:
-        params, safety, name, improved = settings_from(args, ros.get_param, lecture, ros.logwarn)
+        params, safety, name, improved, robot = settings_from(args, ros.get_param, lecture,
+                                                              ros.logwarn)
+        if robot.settings:
+            ros.loginfo('robot preset %s', robot.describe())
+        problem = calibration_problem(args.calibration, args.source)
+        if problem:
+            raise ValueError(problem)
         camera = None if args.calibration == 'topic' else load_calibration(args.calibration)
         if args.calibration == 'topic':
             camera = camera_from_topic(topic_ros, topic, args.open_timeout)
             ros.loginfo('calibration from the first camera_info beside %s: %s', topic,
                         describe(camera))
-        for warning in improved.clipped() if improved else ():
-            ros.logwarn('%s', warning)
+
         odometry = (odometry_from(topic_ros, args.odom, clock=ros.get_time)
                     if name == 'improved' else None)
         controller = make_controller(name, params, camera, improved, args.pipeline, odometry)
+        for warning in getattr(controller, 'warnings', list)():
+            ros.logwarn('%s', warning)
         source = Peeked(open_source(args.source, warn=ros.logwarn, image_topic=args.image_topic,
                                     rospy=topic_ros, fresh=safety.watchdog,
                                     timeout=args.open_timeout))

@@ -139,18 +139,20 @@ PARAMETER = ('the private ROS parameter ~{name}: _{name}:=... on the command lin
              "/kobuki_lane/{name}' removes it)")
 
 
-def resolve(table, args, get_param, defaults=None, file=None):
-    """Flag given > private ROS parameter (~name) > `defaults` (a dict, from `file`) > the
-    table's default; a ValueError that names the setting, where its value came from, and its
-    range when the value is out of it or of the wrong kind."""
-    values, defaults, came = {}, defaults or {}, {}
+def resolve(table, args, get_param, layers=()):
+    """Flag given > private ROS parameter (~name) > the first of `layers` that has it (each
+    (values, where): a mounting file, a robot preset) > the table's default; a ValueError that
+    names the setting, where its value came from, and its range when the value is out of it
+    or of the wrong kind."""
+    values, came = {}, {}
     for f in dataclasses.fields(table):
         flag = getattr(args, f.name)
-        fallback = defaults.get(f.name, f.default)
+        layer = next(((given, where) for given, where in layers if f.name in given), None)
+        fallback = layer[0][f.name] if layer else f.default
         value = flag if flag is not None else get_param('~' + f.name, fallback)
         came[f.name] = ('--' + f.name.replace('_', '-') if flag is not None else
                         PARAMETER.format(name=f.name) if value is not fallback else
-                        file if f.name in defaults else None)
+                        layer[1] if layer else None)
         kind = _kind(f)
         if kind in (int, float) and isinstance(value, str):
             value = _number(value)  # a number as text: a launch file's str, or 1e3 for rospy
