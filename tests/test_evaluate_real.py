@@ -8,10 +8,13 @@ import pytest
 
 from lanelib.camera import DUCKIEBOT_CAMERA
 from lanelib.geometry import Mounting
+from lanelib.robots import load_robot
 from lanelib.sim.world import WORLDS, ColourFloorMap, FloorCamera, Scene, Track
 from tools import evaluate_real
 
-PITCH = evaluate_real.DT_CORE_PITCH  # [deg] rendered as Duckietown's default mounting
+# rendered as the duckiebot preset's camera is mounted: what --robot duckiebot assumes
+PRESET = load_robot('duckiebot', {'camera_height', 'camera_pitch', 'camera_forward', 'lane',
+                                  'roi_near'}).settings
 
 
 @pytest.fixture(scope='module')
@@ -20,7 +23,9 @@ def labelled(tmp_path_factory):
     a floor with no lane, in a source folder of their own."""
     folder = tmp_path_factory.mktemp('labelled')
     (folder / 'rendered').mkdir()
-    camera = FloorCamera(DUCKIEBOT_CAMERA, Mounting(0.10, PITCH, 0.0))
+    camera = FloorCamera(DUCKIEBOT_CAMERA, Mounting(PRESET['camera_height'],
+                                                    PRESET['camera_pitch'],
+                                                    PRESET['camera_forward']))
     world = WORLDS['duckietown']
     rows = []
     for label, angle in (('left', 90), ('right', -90), ('straight', 0)):
@@ -45,20 +50,28 @@ def labelled(tmp_path_factory):
     return folder
 
 
-def test_the_improved_controller_reads_rendered_bends(labelled, tmp_path, capsys):
+def test_the_node_with_the_preset_reads_rendered_bends(labelled, tmp_path, capsys):
+    """Each picture decided by kobuki_lane.py itself with --robot duckiebot, a fresh node per
+    picture: the bends and the straight as they are, and no lane on a bare floor."""
     out = tmp_path / 'r.json'
-    assert evaluate_real.main([str(labelled), '--json', str(out), '--details']) == 0
+    assert evaluate_real.main([str(labelled), '--robot', 'rendered=duckiebot', '--json',
+                               str(out), '--details']) == 0
     report = json.loads(out.read_text())
     results = {r['file']: r for r in report['results']}
     for name in ('left', 'right', 'straight'):
         assert results[f'rendered/{name}.png']['improved'] == name
+        assert results[f'rendered/{name}.png']['flags'] == ('--controller improved --robot '
+                                                            'duckiebot')
     assert results['rendered/empty.png']['improved'] == 'none'
-    # the camera's pitch, estimated from the three frames with lines, is the rendered one
-    assert report['cameras']['rendered']['how'] == 'estimated'
-    assert report['cameras']['rendered']['pitch_deg'] == pytest.approx(PITCH, abs=1.5)
     text = capsys.readouterr().out
     assert 'improved  4/4 (100%), turn direction 2/2 (100%)' in text
     assert 'straight  1/4 (25%), turn direction 0/2 (0%)' in text
+
+
+def test_a_source_with_no_preset_is_refused_before_the_work(labelled):
+    with pytest.raises(SystemExit) as e:
+        evaluate_real.main([str(labelled)])
+    assert e.value.code == 2
 
 
 def test_a_folder_without_labels_is_an_error(tmp_path):

@@ -1,66 +1,59 @@
 #!/usr/bin/env python3
-"""How often the decisions agree with hand labels on real camera frames.
+"""How often the node's decisions agree with hand labels on real camera frames.
 
 Reads a folder with labels.csv (file, expected_steering, confidence, scene, notes), as in
 ../shared/real-frames, and decides every labelled image (and every 10th frame of a labelled
-video) three ways, each image with a fresh controller (no history from other images):
+video) as a user would: kobuki_lane.py itself, run on that one picture (a fresh node, no history
+from other pictures), with the flags a user types for the picture's robot, and nothing else:
 
-    lecture    the lecture's rule (algorithm 1.1), with --calibration none: the lecture's
-               camera matrix belongs to the lecture's camera, not these;
-    improved   the improved controller on that single frame, with the camera, mounting and lane
-               profile of the frame's source (below); its decision word: left or right when the
-               lane's centre lies more than half a lane width to that side at its look-ahead,
-               straight otherwise, none when it sees no lane;
-    straight   always 'straight', the baseline any controller has to beat.
+    improved   --controller improved --robot PRESET: the preset of the source's robot (below);
+               its decision word: left or right when the lane's centre lies more than half a
+               lane width to that side at its look-ahead, straight otherwise, none with no lane
+    lecture    the lecture's rule with --calibration none (the lecture's camera matrix is the
+               lecture's webcam's, not these)
+    straight   always 'straight', the baseline any controller has to beat
 
 A label 'no_lane' expects 'none'. A video counts once, by the decision most of its frames get.
-Figures are printed per source and in all: agreement with the labels, and on the frames
-labelled left or right, how many got the right direction; with and without the labels judged
-doubtful from the pictures (DOUBTFUL below, with why).
+Figures are printed per source and in all: agreement with the labels, and on the frames labelled
+left or right, how many were turned that way; with and without the labels judged doubtful from
+the pictures (DOUBTFUL below, with why).
+
+The presets (--robot SOURCE=PRESET, repeatable, overrides these; a source is a label's first
+folder, and its name's start is enough):
+    duckietown*, negatives*   duckiebot: Duckietown's published default camera and mounting,
+                              config/duckiebot.yaml; frames named *_rect are rectified already:
+                              --calibration duckiebot-rectified (the same camera, no distortion)
+    udacity*                  tools/robots/dashcam.yaml: a car's dash camera on a highway lane,
+                              no calibration published, so what a user would assume (a 60 degree
+                              field of view, level, 1.2 m up); nothing is estimated from the
+                              frames scored
 
 usage (from the repository root):
     python -m tools.evaluate_real ../shared/real-frames [--json out.json] [--details]
-                                                        [--pictures out/real]
-
-Sources (one camera each, never one per frame):
-    duckiebot  Duckietown's published default intrinsics (lanelib.camera.DUCKIEBOT_CAMERA); the
-               duckietown lane profile; the lens 0.10 m above the floor. Its pitch: for dt-core's
-               frames, 22.4 degrees down, where Duckietown's default extrinsic homography puts
-               the horizon (row 115 of the rectified image); for the other Duckietown sources,
-               none published, estimated from the source's own frames (horizon_pitch: the median
-               row where the two lane lines' near parts meet, over all its frames). Floor mask
-               0.1 m (past the Duckiebot's bumper) to 0.8 m ahead. Frames named *_rect are
-               already rectified: the same matrix, no distortion. The controller's distances
-               and speeds are the Kobuki's scaled to a Duckietown lane (x 0.2375 / 0.35).
-    dashcam    no calibration published: a 60 degree horizontal field of view, lens 1.2 m up,
-               pitch estimated as above; a highway lane profile (3.7 m, the left line any
-               colour, the right one white); distances and speeds scaled by 3.7 / 0.35; floor
-               mask 5 to 30 m ahead.
+                                  [--robot SOURCE=PRESET ...] [--pictures out/real]
 """
 
 import argparse
 import collections
+import contextlib
 import csv
-import math
+import io
+import json
 import os
 import sys
-from dataclasses import replace
+import tempfile
 
 import cv2
-import numpy as np
 
-from kobuki_lane import LaneParams, LectureRule, detect
-from lanelib.camera import DUCKIEBOT_CAMERA, Camera
+import kobuki_lane
 from lanelib.cli import check_output, fail
-from lanelib.colour import colour_masks
-from lanelib.improved import ImprovedController, ImprovedParams
-from lanelib.lanes import LaneProfile, Line
-from lanelib.outputs import contact_sheet
-from tools.common import write_json
+from tools.common import REPO, write_json
 
 PROG = 'tools.evaluate_real'
-HIGHWAY = LaneProfile('highway', 3.7, Line('any', 'dashed', 0.15), Line('white', 'solid', 0.15))
-DT_CORE_PITCH = 22.4  # [deg] Duckietown's default extrinsic homography: horizon at row 115
+PRESETS = {'duckietown': 'duckiebot', 'negatives': 'duckiebot',
+           'udacity': os.path.join(REPO, 'tools', 'robots', 'dashcam.yaml')}
+COLUMNS = ('file', 'expected_steering', 'confidence', 'scene')
+STEERING = ('left', 'right', 'straight', 'no_lane')
 DOUBTFUL = {  # label: why it is judged doubtful, from the picture
     'duckietown_dt-core_anti_instagram/316closed_0029.jpg':
         'labelled left for a bend ahead, but the lane in front of the robot runs about 20 '
@@ -80,110 +73,48 @@ def source_of(relpath):
     return relpath.split('/')[0]
 
 
-def camera_for(relpath, width, height):
-    if source_of(relpath).startswith('udacity'):
-        f = (width / 2) / math.tan(math.radians(30))
-        k = np.array([[f, 0, width / 2], [0, f, height / 2], [0, 0, 1]])
-        return Camera('dashcam', k, np.zeros(5), (width, height))
-    if '_rect' in relpath:
-        return replace(DUCKIEBOT_CAMERA, distortion=np.zeros(5))
-    return DUCKIEBOT_CAMERA
+def preset_for(source, presets):
+    """The --robot for a source: the longest key of `presets` its name starts with."""
+    keys = sorted((k for k in presets if source.startswith(k)), key=len, reverse=True)
+    if not keys:
+        raise ValueError(f"no robot preset for the pictures in '{source}': give --robot "
+                         f'{source}=PRESET')
+    return presets[keys[0]]
 
 
-def improved_params(relpath, pitch):
-    """The improved controller's settings for a frame's source, at the camera's pitch."""
-    dashcam = source_of(relpath).startswith('udacity')
-    width = HIGHWAY.lane_width if dashcam else 0.2375
-    s = width / 0.35  # the Kobuki's distances and speeds, scaled to this lane
-    d = ImprovedParams()
-    return ImprovedParams(
-        camera_height=1.2 if dashcam else 0.10, camera_pitch=pitch, camera_forward=0.0,
-        lane='duckietown', lane_width=width, roi_near=5.0 if dashcam else 0.1,
-        roi_far=30.0 if dashcam else 0.8, lookahead=d.lookahead * s,
-        lookahead_min=d.lookahead_min * s, v_max=d.v_max * s, v_min=d.v_min * s, memory=0.0)
+def flags_for(relpath, presets):
+    """The improved controller's flags for a picture, as its robot's user types them."""
+    flags = ['--controller', 'improved', '--robot', preset_for(source_of(relpath), presets)]
+    if '_rect' in os.path.basename(relpath):
+        flags += ['--calibration', 'duckiebot-rectified']
+    return flags
 
 
-def horizon_pitch(frames, camera):
-    """The camera's pitch [deg down] from its frames: the median row where the near parts of
-    the two lane lines meet (long line pieces of white or yellow in the lowest 40 % of each
-    frame, the longest on each side, extended), or None with no frame to read."""
-    rows = []
-    for frame in frames:
-        h, w = frame.shape[:2]
-        cam = camera.scaled_to(w, h)
-        image = cv2.undistort(frame, cam.matrix, cam.distortion, None, cam.matrix)
-        near = np.zeros((h, w), np.uint8)
-        near[int(0.6 * h):] = 255
-        masks = colour_masks(image, near)
-        lines = cv2.HoughLinesP(cv2.Canny((masks['white'] | masks['yellow']) & near, 50, 150),
-                                rho=2, theta=np.pi / 180, threshold=30, minLineLength=h // 10,
-                                maxLineGap=h // 40)
-        row = _meeting_row(lines, w, h)
-        if row is not None:
-            rows.append(row)
-    if not rows:
-        return None
-    k = camera.matrix
-    return math.degrees(math.atan((k[1, 2] - np.median(rows)) / k[1, 1]))
+def node_decides(picture, flags, workdir, stages=None):
+    """The decision record kobuki_lane.py writes for one picture, run in this process with
+    `flags` (what it logs is kept out of the report); with `stages` (a folder) its pictures."""
+    out = os.path.join(workdir, 'decision.jsonl')
+    argv = ['--source', picture, '--dry-run', '--quiet', '--progress', 'off', '--decisions', out,
+            '--force', *flags]
+    if stages:
+        argv += ['--stages', stages]
+    said = io.StringIO()
+    with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):
+        try:
+            status = kobuki_lane.main(argv)
+        except SystemExit as e:
+            status = e.code
+    if status != 0:
+        raise RuntimeError(f'kobuki_lane.py {" ".join(argv)} exited {status}: '
+                           f'{said.getvalue().strip()[-500:]}')
+    with open(out, encoding='utf-8') as f:
+        return json.loads(f.readlines()[-1])
 
 
-def _meeting_row(lines, w, h):
-    best = {}
-    for x1, y1, x2, y2 in ([] if lines is None else lines.reshape(-1, 4)):
-        if x2 == x1 or abs((y2 - y1) / (x2 - x1)) < 0.3:
-            continue
-        slope = (y2 - y1) / (x2 - x1)
-        side = 'left' if slope < 0 else 'right'
-        if (side == 'left') != (x1 + (h - y1) / slope < w / 2):  # each on its own half
-            continue
-        length = math.hypot(x2 - x1, y2 - y1)
-        if side not in best or length > best[side][0]:
-            best[side] = (length, x1, y1, slope)
-    if len(best) < 2:
-        return None
-    (_, xa, ya, sa), (_, xb, yb, sb) = best['left'], best['right']
-    x = (yb - ya + sa * xa - sb * xb) / (sa - sb)
-    return ya + sa * (x - xa)
-
-
-def pitches(folder, rows):
-    """Each source's pitch: dt-core's published one, the others' estimated from their frames
-    (a source of one frame cannot calibrate a camera: Duckietown's default then)."""
-    by_source = collections.defaultdict(list)
-    for row in rows:
-        by_source[source_of(row['file'])].append(row['file'])
-    out = {}
-    for source, files in by_source.items():
-        if source.startswith('duckietown_dt-core'):
-            out[source] = (DT_CORE_PITCH, 'published')
-            continue
-        frames = [f for path in files for f in frames_of(os.path.join(folder, path))]
-        estimate = horizon_pitch(frames, camera_for(files[0], *frames[0].shape[1::-1])) \
-            if len(files) >= 3 else None
-        out[source] = ((estimate, 'estimated') if estimate is not None
-                       else (DT_CORE_PITCH, 'default'))
-    return out
-
-
-def decide(frame, relpath, pitch, pictures=None):
-    """(lecture decision, improved decision, improved record) for one frame; with
-    `pictures` (a path ending in .png), the improved controller's stages there, as one sheet."""
-    p = LaneParams()
-    lecture = LectureRule(p)(detect(frame, None, p)).decision
-    camera = camera_for(relpath, frame.shape[1], frame.shape[0])
-    profile = HIGHWAY if source_of(relpath).startswith('udacity') else None
-    ctl = ImprovedController(p, improved_params(relpath, pitch), camera, profile)
-    detection = ctl.perceive(frame, keep_stages=pictures is not None)
-    command = ctl(detection)
-    if pictures is not None:
-        cv2.imwrite(pictures, contact_sheet([(title, image) for _, title, image in
-                                             ctl.pictures(detection, command)], columns=3))
-    return lecture, command.decision, dict(ctl.extra(), angular_z=round(command.angular_z, 3))
-
-
-def frames_of(path):
+def frames_of(path, workdir):
+    """The picture itself, or every 10th frame of a video written out as pictures."""
     if not path.lower().endswith(('.mp4', '.avi', '.mov')):
-        yield cv2.imread(path)
+        yield path
         return
     cap = cv2.VideoCapture(path)
     i = 0
@@ -192,13 +123,11 @@ def frames_of(path):
         if not ok:
             break
         if i % 10 == 0:
-            yield frame
+            picture = os.path.join(workdir, f'frame_{i:05d}.png')
+            cv2.imwrite(picture, frame)
+            yield picture
         i += 1
     cap.release()
-
-
-COLUMNS = ('file', 'expected_steering', 'confidence', 'scene')
-STEERING = ('left', 'right', 'straight', 'no_lane')
 
 
 def read_labels(folder):
@@ -221,36 +150,43 @@ def read_labels(folder):
     return rows
 
 
-def evaluate(folder, pictures=None):
+def evaluate(folder, presets, pictures=None):
     """Every labelled file decided three ways; with `pictures` (a folder), the improved
-    controller's stages of each (of a video, its first frame read) as <file>.png there."""
-    rows = read_labels(folder)
-    pitch = pitches(folder, rows)
+    controller's stages of each (of a video, its first frame) as <file>_sheet.png there."""
     results = []
-    for row in rows:
+    for row in read_labels(folder):
         expected = 'none' if row['expected_steering'] == 'no_lane' else row['expected_steering']
         votes = {'lecture': collections.Counter(), 'improved': collections.Counter()}
+        flags = flags_for(row['file'], presets)
         detail = None
-        for i, frame in enumerate(frames_of(os.path.join(folder, row['file']))):
-            sheet = None
-            if pictures is not None and i == 0:
-                sheet = os.path.join(pictures, row['file'].replace('/', '__') + '.png')
-            lecture, improved, detail = decide(frame, row['file'],
-                                               pitch[source_of(row['file'])][0], sheet)
-            votes['lecture'][lecture] += 1
-            votes['improved'][improved] += 1
+        with tempfile.TemporaryDirectory() as work:
+            for i, picture in enumerate(frames_of(os.path.join(folder, row['file']), work)):
+                stages = None
+                if pictures is not None and i == 0:
+                    stages = os.path.join(work, 'stages')
+                lecture = node_decides(picture, ['--calibration', 'none'], work)
+                detail = node_decides(picture, flags, work, stages)
+                votes['lecture'][lecture['decision']] += 1
+                votes['improved'][detail['decision']] += 1
+                if stages:
+                    sheet = [n for n in os.listdir(stages) if n.endswith('_sheet.png')][0]
+                    os.replace(os.path.join(stages, sheet), os.path.join(
+                        pictures, row['file'].replace('/', '__') + '.png'))
         results.append(dict(file=row['file'], source=source_of(row['file']),
                             expected=expected, confidence=row['confidence'],
                             scene=row['scene'], doubtful=DOUBTFUL.get(row['file']),
+                            flags=' '.join(flags),
                             lecture=votes['lecture'].most_common(1)[0][0],
                             improved=votes['improved'].most_common(1)[0][0],
                             straight='straight', frames=sum(votes['lecture'].values()),
-                            improved_detail=detail))
-    return results, pitch
+                            improved_detail={k: detail.get(k) for k in (
+                                'offset_m', 'heading_rad', 'curvature', 'confidence',
+                                'angular_z')}))
+    return results
 
 
 def figures(results, name):
-    """'agree/n (pct), turns right/turns' for one way of deciding."""
+    """'agree/n (pct), turn direction right/turns (pct)' for one way of deciding."""
     n = len(results)
     agree = sum(r[name] == r['expected'] for r in results)
     turns = [r for r in results if r['expected'] in ('left', 'right')]
@@ -260,10 +196,11 @@ def figures(results, name):
     return f'{agree}/{n}{pct}, turn direction {right}/{len(turns)}{tpct}'
 
 
-def report(results, pitch, details=False, stream=None):
+def report(results, details=False, stream=None):
     stream = stream or sys.stdout
-    stream.write('cameras: ' + '; '.join(f'{s} pitch {p:.1f} deg ({how})'
-                                         for s, (p, how) in sorted(pitch.items())) + '\n')
+    flags = sorted({(r['source'], r['flags']) for r in results})
+    stream.write('flags per source (besides --source PICTURE --dry-run):\n' +
+                 ''.join(f'  {source}: {flag}\n' for source, flag in flags))
     standing = [r for r in results if not r['doubtful']]
     for title, subset in (('all labels', results),
                           (f'without the {len(results) - len(standing)} doubtful labels',
@@ -285,12 +222,23 @@ def report(results, pitch, details=False, stream=None):
                          f" | {r['lecture']} | {r['improved']} |\n")
 
 
+def preset_option(text):
+    source, sep, preset = text.partition('=')
+    if not sep or not source or not preset:
+        raise argparse.ArgumentTypeError(f"'{text}' is not SOURCE=PRESET, e.g. "
+                                         'rendered=duckiebot')
+    return source, preset
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('folder', help='a folder with labels.csv')
     parser.add_argument('--json', metavar='FILE', help='write every decision as JSON')
     parser.add_argument('--details', action='store_true', help='a table of every file')
+    parser.add_argument('--robot', type=preset_option, action='append', default=[],
+                        metavar='SOURCE=PRESET',
+                        help='the --robot for the pictures of a source (see above)')
     parser.add_argument('--pictures', metavar='DIR',
                         help="write the improved controller's stages for every file there (one "
                         'sheet per file: the frame, undistorted, the floor band, each colour '
@@ -306,14 +254,16 @@ def main(argv=None):
         except OSError as e:
             fail(PROG, f"--pictures: cannot make '{args.pictures}': {e.strerror}")
         check_output(PROG, os.path.join(args.pictures, 'x.png'), '--pictures')
+    presets = dict(PRESETS, **dict(args.robot))
     try:
-        read_labels(args.folder)
+        rows = read_labels(args.folder)
+        for row in rows:
+            preset_for(source_of(row['file']), presets)
     except (OSError, ValueError) as e:
         fail(PROG, str(e))
-    results, pitch = evaluate(args.folder, args.pictures)
-    report(results, pitch, args.details)
-    write_json(args.json, dict(cameras={s: dict(pitch_deg=round(p, 2), how=how)
-                                        for s, (p, how) in pitch.items()}, results=results))
+    results = evaluate(args.folder, presets, args.pictures)
+    report(results, args.details)
+    write_json(args.json, dict(presets=presets, results=results))
     return 0
 
 
