@@ -16,7 +16,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from lanelib.lanefit import LaneFit, find_lane
+from lanelib.lanefit import LaneFit, find_lane, robot_offset
 
 MIN_SEEN = 0.25  # [lane widths] of the lane's lines: less is no lane (a scrap, a glint)
 FULL_VIEW = 2.9  # [lane widths] of line seen counts as a full view (confidence 1)
@@ -53,6 +53,10 @@ class LaneEstimate:
     def arc(self):  # (e, psi, k) of the arc it starts as, lanefit's shape
         return self.a, math.atan(self.b), self.curvature
 
+    @property
+    def across(self):  # the centre line's distance to the robot's left, across the lane [m]
+        return robot_offset(*self.arc)
+
     def point_at(self, distance):
         """(x, y, heading) of the centre line `distance` [m] from the robot, following it as
         the arc it starts as (a polynomial in x cannot turn 90 degrees)."""
@@ -70,7 +74,7 @@ def measure(pieces, profile, p, prior=None, anchor=None):
     the robot, if known better than the prior's (lanefit.find_lane)."""
     fit = find_lane(pieces, profile, p.lane_width, prior, width_tolerance=p.width_tolerance,
                     anchor=anchor)
-    if fit is None or fit.left + fit.right < MIN_SEEN * p.lane_width or abs(fit.e) > fit.width:
+    if fit is None or fit.left + fit.right < MIN_SEEN * p.lane_width or abs(robot_offset(fit.e, fit.psi, fit.k)) > fit.width:
         return None, fit
     b = math.tan(fit.psi)
     confidence = (min(1.0, (fit.left + fit.right) / (FULL_VIEW * p.lane_width)) *

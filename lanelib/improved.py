@@ -277,7 +277,7 @@ class ImprovedController:
         self.mark('lane')
         self.sides = None if fit is None else fit.sides
         blind = self.lost_for > p.lost_timeout  # the estimate from before is stale
-        if blind and meas is not None and abs(meas.a) > REGAINED * w:
+        if blind and meas is not None and abs(meas.across) > REGAINED * w:
             meas = None  # another lane (the far leg of a U-turn): keep searching
         if meas is not None:
             self.lost_for, self.search = 0.0, None

@@ -40,6 +40,15 @@ def signed_distance(x, y, e, psi, k):
     return _distance(x, y, e, psi, k)[0]
 
 
+def robot_offset(e, psi, k):
+    """How far the centre arc lies to the robot's left [m], across the arc (the robot's
+    distance from it, + when the robot is to its right): e is where the arc crosses the robot's
+    sideways axis, which for a lane running across the view lies much further out than the lane
+    itself (e cos psi on a straight lane), so a robot well inside a lane it is turning into would
+    be judged outside it by e."""
+    return -signed_distance(0.0, 0.0, e, psi, k)
+
+
 def _arc_frame(x, y, e, psi):
     """(u, v, sin psi, cos psi): points in the arc's own frame, u ahead, v left of its start."""
     s, c = np.sin(psi), np.cos(psi)
@@ -226,7 +235,7 @@ def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tole
             # only with both its lines in view: one line alone fits a lane on either side of
             # it, and which one is the search's to say (the score, with the anchor)
             _, lane, sides, support = found
-            if (1 in sides and -1 in sides and abs(lane[0]) <= lane[3] / 2 and
+            if (1 in sides and -1 in sides and abs(robot_offset(*lane[:3])) <= lane[3] / 2 and
                     support >= explained * total):
                 return _lane(pieces, found)
     seeds = [] if prior is None else [(*prior, lane_width)]
@@ -263,7 +272,8 @@ def _fit_seeds(seeds, pieces, points, allowed, lane_width, priors, limits, regio
     middle = (np.abs(distance.reshape(len(lanes), -1, POINTS).mean(axis=2)) <
               half[:, None] / 2)
     inside = (np.repeat(middle & (sides == 0), POINTS, axis=1) * w).sum(axis=1)
-    outside = np.maximum(0.0, np.abs(lanes[:, 0]) - half)  # the robot outside the lane it names
+    # the robot outside the lane it names
+    outside = np.maximum(0.0, np.abs(robot_offset(lanes[:, 0], lanes[:, 1], lanes[:, 2])) - half)
     score = (np.sqrt(left) + np.sqrt(right) - np.sqrt(inside)) * np.exp(-outside / half)
     if anchor is not None:
         # with one line in view, a lane with it on the left and one with it on the right are

@@ -10,6 +10,7 @@ import pytest
 from lanelib.colour import Piece
 from lanelib.estimate import LaneEstimate, blend, measure, predict
 from lanelib.improved import ImprovedParams
+from lanelib.lanefit import robot_offset
 from lanelib.lanes import BUILTIN
 from lanelib.memory import LaneMemory
 from lanelib.robot import arc_step
@@ -64,6 +65,37 @@ def test_no_line_or_a_scrap_is_no_lane():
 def test_a_lane_the_robot_would_be_far_outside_is_not_its_own():
     est, _ = measure(line_pieces(1.2, 'white') + line_pieces(0.95, 'yellow'), DT, P)
     assert est is None
+
+
+def slanted_pieces(intercept, psi, colour, along=(0.1, 0.6), step=0.08):
+    """Pieces of a straight line crossing the robot's sideways axis at `intercept` [m] and
+    heading psi [rad] (+ left), over x from along[0] to along[1]."""
+    pieces = []
+    for s0 in np.arange(along[0], along[1], step * math.cos(psi)):
+        x = np.linspace(s0, s0 + step * math.cos(psi), 20)
+        pieces.append(Piece(x, intercept + math.tan(psi) * x, psi, colour, step, 0.03))
+    return pieces
+
+
+def test_a_lane_running_across_the_view_with_the_robot_inside_it_is_the_robots():
+    # the robot 10 cm right of the centre of a lane that runs 68 degrees to its right (turned
+    # into a corner): the centre line crosses the robot's sideways axis 0.27 m to its left,
+    # more than a lane width, but the robot is inside the lane, 0.1 m from its centre line
+    psi, across = math.radians(-68), 0.10
+    e, half = across / math.cos(psi), DT.lane_width / 2 / math.cos(psi)
+    est, _ = measure(slanted_pieces(e + half, psi, 'yellow') +
+                     slanted_pieces(e - half, psi, 'white'), DT, P)
+    assert est is not None and est.across == pytest.approx(across, abs=0.01)
+    assert math.degrees(est.heading) == pytest.approx(68, abs=2)
+
+
+def test_robot_offset_is_the_distance_across_the_arc():
+    assert robot_offset(0.2, math.radians(-60), 0.0) == pytest.approx(0.1)
+    assert robot_offset(-0.2, math.radians(60), 0.0) == pytest.approx(-0.1)
+    # a left bend of radius 0.5 through (0, 0.1): its centre (0, 0.6), the robot 0.6 from it
+    assert robot_offset(0.1, 0.0, 2.0) == pytest.approx(0.1)
+    assert robot_offset(-0.1, 0.0, 2.0) == pytest.approx(-0.1)  # centre (0, 0.4), robot 0.4
+    assert robot_offset(0.0, 0.7, -3.0) == pytest.approx(0.0)  # on the arc
 
 
 # ---------------------------------------------------------------- predict and blend
