@@ -6,15 +6,18 @@ import json
 import cv2
 import pytest
 
+from kobuki_lane import LaneParams
 from lanelib.camera import DUCKIEBOT_CAMERA
 from lanelib.geometry import Mounting
+from lanelib.improved import ImprovedParams
 from lanelib.robots import load_robot
+from lanelib.safety import Safety
 from lanelib.sim.world import WORLDS, ColourFloorMap, FloorCamera, Scene, Track
 from tools import evaluate_real
 
 # rendered as the duckiebot preset's camera is mounted: what --robot duckiebot assumes
-PRESET = load_robot('duckiebot', {'camera_height', 'camera_pitch', 'camera_forward', 'lane',
-                                  'roi_near'}).settings
+PRESET = load_robot('duckiebot', {f for table in (LaneParams, ImprovedParams, Safety)
+                                  for f in table.__dataclass_fields__}).settings
 
 
 @pytest.fixture(scope='module')
