@@ -161,6 +161,27 @@ def test_roslaunch_sets_only_what_the_user_sets(roscore, few_frames, tmp_path):
     assert all(r['linear_x'] == 0.05 for r in records)  # and its straight_linear
 
 
+def test_roslaunch_takes_a_robot_preset_and_a_calibration(roscore, few_frames, tmp_path):
+    """robot:=duckiebot sets the preset's camera, lane and rate; calibration:= outranks the
+    preset's camera (before, the launch file always passed --calibration lecture, which hid a
+    preset's camera)."""
+    decisions = tmp_path / 'preset.jsonl'
+    base = ['roslaunch', 'kobuki_lane', 'kobuki_lane.launch', f'source:={few_frames}',
+            'robot:=duckiebot', 'controller:=improved',
+            f'extra_args:=--decisions {decisions} --wait-for-base 0']
+    proc = subprocess.run(base, env=roscore['env'], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=90)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    said = proc.stdout + proc.stderr
+    assert "robot preset 'duckiebot'" in said and 'calibration duckiebot' in said
+    assert '8.0 Hz' in said and len(read_jsonl(decisions)) == 8
+    decisions.unlink()
+    proc = subprocess.run(base + ['calibration:=lecture'], env=roscore['env'], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=90)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    assert 'calibration lecture' in proc.stdout + proc.stderr
+
+
 def test_rosnode_kill_stops_the_robot_before_exit(roscore, twist_recorder):
     proc = start_node_on_samples(roscore)
     twist_recorder.wait_for(3, timeout=20)
