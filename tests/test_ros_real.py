@@ -121,15 +121,21 @@ def test_no_master_exits_2_without_hanging(roscore, tmp_path):
     assert time.monotonic() - start < 15
 
 
+def roslaunch(roscore, cwd, source, *arguments, extra=''):
+    """roslaunch kobuki_lane kobuki_lane.launch source:=SOURCE ARGUMENTS extra_args:=EXTRA,
+    run to its end (CompletedProcess)."""
+    cmd = ['roslaunch', 'kobuki_lane', 'kobuki_lane.launch', f'source:={source}', *arguments,
+           f'extra_args:={extra}']
+    return subprocess.run(cmd, env=roscore['env'], cwd=cwd, capture_output=True, text=True,
+                          timeout=90)
+
+
 def test_roslaunch_starts_the_node_with_its_launch_parameters(roscore, twist_recorder,
                                                               few_frames, tmp_path):
     decisions = tmp_path / 'launched.jsonl'
     # threshold 0.5 in the launch file makes the rule turn where the default goes straight
-    cmd = ['roslaunch', 'kobuki_lane', 'kobuki_lane.launch', f'source:={few_frames}',
-           'threshold:=0.5', 'turn_angular:=0.3',
-           f'extra_args:=--decisions {decisions} --wait-for-base 5']
-    proc = subprocess.run(cmd, env=roscore['env'], cwd=tmp_path, capture_output=True,
-                          text=True, timeout=90)
+    proc = roslaunch(roscore, tmp_path, few_frames, 'threshold:=0.5', 'turn_angular:=0.3',
+                     extra=f'--decisions {decisions} --wait-for-base 5')
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     records = read_jsonl(decisions)
     assert len(records) == 8
@@ -149,10 +155,8 @@ def test_roslaunch_sets_only_what_the_user_sets(roscore, few_frames, tmp_path):
     import rospy
 
     decisions = tmp_path / 'defaults.jsonl'
-    cmd = ['roslaunch', 'kobuki_lane', 'kobuki_lane.launch', f'source:={few_frames}',
-           f'extra_args:=--decisions {decisions} --wait-for-base 0']
-    proc = subprocess.run(cmd, env=roscore['env'], cwd=tmp_path, capture_output=True,
-                          text=True, timeout=90)
+    proc = roslaunch(roscore, tmp_path, few_frames,
+                     extra=f'--decisions {decisions} --wait-for-base 0')
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     assert [name for name in rospy.get_param_names() if name.startswith('/kobuki_lane/')] == []
     records = read_jsonl(decisions)
@@ -166,18 +170,15 @@ def test_roslaunch_takes_a_robot_preset_and_a_calibration(roscore, few_frames, t
     preset's camera (before, the launch file always passed --calibration lecture, which hid a
     preset's camera)."""
     decisions = tmp_path / 'preset.jsonl'
-    base = ['roslaunch', 'kobuki_lane', 'kobuki_lane.launch', f'source:={few_frames}',
-            'robot:=duckiebot', 'controller:=improved',
-            f'extra_args:=--decisions {decisions} --wait-for-base 0']
-    proc = subprocess.run(base, env=roscore['env'], cwd=tmp_path, capture_output=True,
-                          text=True, timeout=90)
+    preset = ('robot:=duckiebot', 'controller:=improved')
+    extra = f'--decisions {decisions} --wait-for-base 0'
+    proc = roslaunch(roscore, tmp_path, few_frames, *preset, extra=extra)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     said = proc.stdout + proc.stderr
     assert "robot preset 'duckiebot'" in said and 'calibration duckiebot' in said
     assert '8.0 Hz' in said and len(read_jsonl(decisions)) == 8
     decisions.unlink()
-    proc = subprocess.run(base + ['calibration:=lecture'], env=roscore['env'], cwd=tmp_path,
-                          capture_output=True, text=True, timeout=90)
+    proc = roslaunch(roscore, tmp_path, few_frames, *preset, 'calibration:=lecture', extra=extra)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     assert 'calibration lecture' in proc.stdout + proc.stderr
 
@@ -326,11 +327,9 @@ def test_roslaunch_passes_the_lane_profile(roscore, few_frames, tmp_path):
     mounting.write_text('height: 0.1\npitch_deg: 21.5\nroll_deg: 0\nforward: 0.05\n')
 
     def launch(lane):
-        cmd = ['roslaunch', 'kobuki_lane', 'kobuki_lane.launch', f'source:={few_frames}',
-               'controller:=improved', f'lane:={lane}', f'mounting:={mounting}',
-               f"extra_args:=--decisions {tmp_path / (lane + '.jsonl')} --wait-for-base 0"]
-        return subprocess.run(cmd, env=roscore['env'], cwd=tmp_path, capture_output=True,
-                              text=True, timeout=90)
+        return roslaunch(roscore, tmp_path, few_frames, 'controller:=improved', f'lane:={lane}',
+                         f'mounting:={mounting}',
+                         extra=f"--decisions {tmp_path / (lane + '.jsonl')} --wait-for-base 0")
 
     proc = launch('duckietown')
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
