@@ -64,8 +64,8 @@ DOUBTFUL = {  # label: why it is judged doubtful, from the picture
         'lane follower turns right first',
     'duckietown_dt-core_anti_instagram/226noon_0005.jpg':
         'labelled straight for a straight road, but both lines lean right and meet about 11 '
-        'degrees right of the image centre: the robot stands askew, its lane 0.9 m ahead lies '
-        'more than half a lane to the right, and a lane follower turns right to line up',
+        'degrees right of the image centre: the robot stands askew, its lane at the look-ahead '
+        'lies more than half a lane to the right, and a lane follower turns right to line up',
 }
 
 
