@@ -74,8 +74,7 @@ def measure(pieces, profile, p, prior=None, anchor=None):
     the robot, if known better than the prior's (lanefit.find_lane)."""
     fit = find_lane(pieces, profile, p.lane_width, prior, width_tolerance=p.width_tolerance,
                     anchor=anchor)
-    if (fit is None or fit.left + fit.right < MIN_SEEN * p.lane_width or
-            abs(robot_offset(fit.e, fit.psi, fit.k)) > fit.width):
+    if fit is None or fit.left + fit.right < MIN_SEEN * p.lane_width or abs(fit.across) > fit.width:
         return None, fit
     b = math.tan(fit.psi)
     confidence = (min(1.0, (fit.left + fit.right) / (FULL_VIEW * p.lane_width)) *

@@ -117,6 +117,10 @@ class LaneFit:
         self.width = width
         self.sides, self.left, self.right, self.centre = sides, left, right, centre
 
+    @property
+    def across(self):  # the centre line's distance to the robot's left, across the lane [m]
+        return robot_offset(self.e, self.psi, self.k)
+
     def point_at(self, distance):
         """(x, y, heading) of the centre line at `distance` [m] from the robot, along it; on
         a circle too small to reach that far, its point furthest from the robot (half way
@@ -273,7 +277,7 @@ def _fit_seeds(seeds, pieces, points, allowed, lane_width, priors, limits, regio
               half[:, None] / 2)
     inside = (np.repeat(middle & (sides == 0), POINTS, axis=1) * w).sum(axis=1)
     # the robot outside the lane it names
-    outside = np.maximum(0.0, np.abs(robot_offset(lanes[:, 0], lanes[:, 1], lanes[:, 2])) - half)
+    outside = np.maximum(0.0, np.abs(robot_offset(*lanes[:, :3].T)) - half)
     score = (np.sqrt(left) + np.sqrt(right) - np.sqrt(inside)) * np.exp(-outside / half)
     if anchor is not None:
         # with one line in view, a lane with it on the left and one with it on the right are
