@@ -186,6 +186,18 @@ class LectureRule:
     def extra(self):
         return {}
 
+    def tuned_settings(self):
+        """The settings live tuning may change (lanelib/tuning.py)."""
+        return self.p
+
+    def retune(self, p):
+        """Settings changed while the node runs: from the next frame on."""
+        self.p = p
+        if isinstance(self.pipeline, FastPipeline):
+            self.pipeline.p = p
+        else:
+            self.pipeline = slides_pipeline(p)
+
     def sent(self, command):
         """What went to the wheels (the rule keeps no state)."""
 
@@ -241,6 +253,7 @@ class LaneFollower:
         self.last_error = None  # what the last of them failed with
         self.ended = None  # why the loop ended
         self.stop_requested = None
+        self.tuning = None  # live tuning on ROS (lanelib/tuning.py), applied before each frame
 
     def request_stop(self, reason):
         """Ask the loop to end after this iteration (signal handlers call this)."""
@@ -256,7 +269,9 @@ class LaneFollower:
         read_at = ros.get_time() if read_at is None else read_at
         if self.check is not None:
             self.check(frame)
-        detection = self.controller.perceive(frame, keep_stages=bool(self.outputs.stages))
+        if self.tuning is not None:
+            self.tuning.apply()  # a setting changed live (lanelib/tuning.py): from this frame
+        detection = self.controller.perceive(frame, keep_stages=self.outputs.wants_stages())
         command = self.controller(detection, read_at)
         late = ros.get_time() - read_at > self.base.safety.watchdog
         held = self.base.held
@@ -279,7 +294,10 @@ class LaneFollower:
             detection.slopes.theta, detection.slopes.value, command.decision, command.linear_x,
             command.angular_z, ' [late: stopped]' if late else f' [{held}: stopped]' if held
             else '')
-        if self.outputs.frame(record, detection, command, ros.get_time()):
+        # a topic's frame carries its header stamp as its label (sources.TopicSource)
+        header = ((label, getattr(self.source, 'frame_id', '') or 'camera')
+                  if isinstance(label, float) else (read_at, 'camera'))
+        if self.outputs.frame(record, detection, command, ros.get_time(), header):
             self.request_stop('q pressed')
         return record
 
@@ -473,7 +491,8 @@ def main(argv=None, make_controller=make_controller):
         # the slides' rospy.Publisher('/mobile_base/commands/velocity', Twist, queue_size=1)
         # and their Twist "thrust": SafeBase (lanelib/safety.py), the one way to the wheels
         base = SafeBase(ros, twist_type, safety,
-                        record=outputs.record_twist if outputs.bag else None)
+                        record=outputs.record_twist if outputs.bag else None,
+                        topic=node.base_topic(args, ros))
         # last, so that no early exit leaves its thread inside OpenCV (that aborts the process)
         if not source.live:
             source = Prefetch(source)  # decode the next frames on the second core

@@ -15,13 +15,13 @@ import struct
 import threading
 import time
 
-import cv2
+import numpy as np
 
 from lanelib.cli import warning
-from lanelib.imagemsg import ImageMessageError, decode_image
+from lanelib.imagemsg import DEBUG_IMAGE, ImageMessageError, decode_image, jpeg
 
 IMAGE_TYPES = ('sensor_msgs/msg/Image', 'sensor_msgs/msg/CompressedImage')
-DEBUG_TOPIC = '/kobuki_lane/debug_image/compressed'
+DEBUG_TOPIC = '/kobuki_lane/' + DEBUG_IMAGE  # the node's, as a node named kobuki_lane has it
 
 
 class BagError(Exception):
@@ -226,13 +226,12 @@ class BagRecorder:
             return
         types = self._store.types
         ns = self._ns(t)
-        ok, jpg = cv2.imencode('.jpg', bgr, [cv2.IMWRITE_JPEG_QUALITY, 80])
         header = types['std_msgs/msg/Header'](
             seq=self._seq, stamp=types['builtin_interfaces/msg/Time'](sec=ns // 10**9,
                                                                       nanosec=ns % 10**9),
             frame_id='camera')
         msg = types['sensor_msgs/msg/CompressedImage'](header=header, format='jpeg',
-                                                       data=jpg.ravel())
+                                                       data=np.frombuffer(jpeg(bgr), np.uint8))
         self._seq += 1
         self._write(self._image, ns,
                     self._store.serialize_ros1(msg, 'sensor_msgs/msg/CompressedImage'))

@@ -1,4 +1,5 @@
-"""sensor_msgs/Image and CompressedImage to OpenCV frames, for bags and live topics alike.
+"""sensor_msgs/Image and CompressedImage to OpenCV frames, for bags and live topics alike, and
+the debug image's one name and encoding, for the debug topic and the bag alike.
 
 Both rosbags' messages and rospy's have the fields used here (height, width, step, encoding,
 is_bigendian, data; format and data for CompressedImage).
@@ -14,6 +15,18 @@ ENCODINGS = {  # encoding: (dtype, channels, conversion to BGR or None)
     'mono8': (np.uint8, 1, None), '8UC1': (np.uint8, 1, None),
     'mono16': (np.uint16, 1, None), '16UC1': (np.uint16, 1, None),
 }
+
+
+DEBUG_IMAGE = 'debug_image/compressed'  # in the node's namespace: /kobuki_lane/debug_image/...
+JPEG_QUALITY = 80
+
+
+def jpeg(image):
+    """A BGR image as JPEG bytes (the debug image's CompressedImage data)."""
+    ok, data = cv2.imencode('.jpg', image, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+    if not ok:
+        raise ValueError('OpenCV could not encode the picture as JPEG')
+    return data.tobytes()
 
 
 class ImageMessageError(ValueError):

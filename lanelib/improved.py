@@ -189,6 +189,16 @@ class ImprovedController:
         self.cluttered = False  # the last frame had more than max_pieces pieces of line
         self.reset()
 
+    def tuned_settings(self):
+        """The settings live tuning may change (lanelib/tuning.py): as given, in lane widths."""
+        return self.params
+
+    def retune(self, p):
+        """Gains and speeds changed while the node runs (the lane and the camera's view stay):
+        from the next frame on."""
+        self.params = p
+        self.p = p.in_metres(self.p.lane_width)
+
     def warnings(self):
         """What to say at start about these settings (speeds above the Kobuki's)."""
         return self.params.clipped(self.p.lane_width)

@@ -22,18 +22,28 @@ from lanelib.mounting import mounting_settings
 from lanelib.outputs import Outputs, Progress, VideoSink, summary
 from lanelib.robot import VELOCITY_TOPIC
 from lanelib.robots import DEFAULT, load_robot
-from lanelib.ros import MasterWatch, RosUnavailable, connect, debug_publisher, private_names
+from lanelib.ros import (
+    MasterWatch,
+    RosUnavailable,
+    connect,
+    debug_publisher,
+    private_names,
+    velocity_topic,
+)
 from lanelib.safety import Safety, say
 from lanelib.settings import resolve, unknown
 from lanelib.sources import FrameCheck, Peeked, SourceError, check_first_frame, open_source
 from lanelib.topics import TopicError, camera_from_topic, odometry_from, topic_of
+from lanelib.tuning import Tuning
+from lanelib.watch import EstimateTopics, Health
 
 EXIT_STATUS = {'end of input': 0, 'ROS shutdown': 0, 'q pressed': 0, 'camera lost': 1,
                'pipeline errors': 1, 'SIGINT': 130, 'SIGTERM': 143, 'SIGHUP': 129}
 
 
 IMPROVED_ONLY = tuple(f.name for f in fields(ImprovedParams)) + ('mounting', 'odom')
-OTHER_PARAMETERS = ('controller', 'robot', 'calibration', 'mounting', 'odom')  # in no table
+OTHER_PARAMETERS = ('controller', 'robot', 'calibration', 'mounting', 'odom', 'debug_image',
+                    'robot_preset', 'diagnostic_period')  # in no table
 
 
 def settings_from(args, get_param, lecture, warn=None):
@@ -45,7 +55,8 @@ def settings_from(args, get_param, lecture, warn=None):
     parameters said to be ignored; a preset may hold them (a robot's camera is the same under
     either controller)."""
     known = {f.name for table in (lecture, ImprovedParams, Safety) for f in fields(table)}
-    robot = load_robot(args.robot or str(get_param('~robot', DEFAULT)), known)
+    loaded = None if args.robot else get_param('~robot_preset', None)  # the launch file's
+    robot = load_robot(args.robot or str(get_param('~robot', DEFAULT)), known, loaded)
     preset = (robot.settings, f"the robot preset '{robot.name}' ({robot.path})")
     params = resolve(lecture, args, get_param, [preset])
     safety = resolve(Safety, args, get_param, [preset])
@@ -95,10 +106,15 @@ def open_outputs(prog, args, params, ros, source, controller):
         os.makedirs(args.stages, exist_ok=True)  # made now that the run can go
     decisions = open(args.decisions, 'w', encoding='utf-8') if args.decisions else None
     video = VideoSink(args.video, params.rate) if args.video else None
-    debug = None if args.dry_run else debug_publisher(ros)
+    debug = watch = None
+    if not args.dry_run:  # what a ROS run shows: the debug image, the decision and estimate
+        debug = debug_publisher(ros)
+        watch = EstimateTopics(ros, lane=controller.name == 'improved')
     return Outputs(params, decisions, video, args.stages, bag, debug, args.show,
                    Progress(source.total, show_progress), getattr(controller, 'draw', None),
-                   getattr(controller, 'pictures', None), lambda text: ros.logerr('%s', text))
+                   getattr(controller, 'pictures', None), lambda text: ros.logwarn('%s', text),
+                   debug_stage=str(ros.get_param('~debug_image', 'annotated')),
+                   watch=[watch.publish] if watch else [])
 
 
 def connect_to_ros(prog, args, private):
@@ -120,6 +136,9 @@ def set_up(prog, args, ros, topic_ros, lecture, make_controller):
     parameters; `lecture`: the lecture's table; make_controller(name, params, camera, improved,
     pipeline, odometry): kobuki_lane's. Exit 2 for what cannot be used."""
     topic = topic_of(args.source)
+    if topic and topic_ros is not None:  # a relative name: in the node's namespace, remapped
+        topic = topic_ros.resolve_name(topic)
+        args.source = 'ros:' + topic
     for unknown_name, guess in unknown(private_names(ros), (lecture, ImprovedParams, Safety),
                                        OTHER_PARAMETERS):
         ros.logwarn('unknown private parameter ~%s, ignored%s', unknown_name,
@@ -158,6 +177,11 @@ def set_up(prog, args, ros, topic_ros, lecture, make_controller):
     return params, safety, controller, source, check
 
 
+def base_topic(args, ros):
+    """The velocity topic: the lecture's for a dry run's record, else as ros.velocity_topic."""
+    return VELOCITY_TOPIC if args.dry_run else velocity_topic(ros)
+
+
 def started(ros, args, follower, params):
     """The log line at start: what runs, on what, how fast."""
     controller, lane = follower.controller, getattr(follower.controller, 'profile', None)
@@ -168,7 +192,7 @@ def started(ros, args, follower, params):
                   f'pitched {p.camera_pitch:g} deg)')
     ros.loginfo('kobuki_lane: source %s, %s controller%s, algorithm %s, calibration %s, %.1f Hz '
                 'on %s%s', follower.source.name, controller.name, detail, params.algorithm,
-                args.calibration, params.rate, VELOCITY_TOPIC,
+                args.calibration, params.rate, follower.base.topic,
                 ' (dry run)' if args.dry_run else '')
 
 
@@ -176,13 +200,19 @@ def drive(prog, args, follower, topic_ros):
     """Run the loop (kobuki_lane.LaneFollower) to its end, with the ROS master watched; close
     the source and every output whatever happened; the exit status and the summary."""
     ros, base, source, outputs = follower.ros, follower.base, follower.source, follower.outputs
-    watch = None if args.dry_run else MasterWatch(base, ros).start()
+    watch = health = None
+    if not args.dry_run:
+        watch = MasterWatch(base, ros).start()
+        health = Health(ros, follower, watch).start()
+        outputs.watch.append(health.frame)
+        follower.tuning = Tuning(ros, follower.controller)
     start = time.monotonic()
     try:
         ended = follower.run(0.0 if args.dry_run else args.wait_for_base)
     finally:
-        if watch is not None:
-            watch.stop()
+        for thread in (watch, health):
+            if thread is not None:
+                thread.stop()
         source.release()
         outputs.close()
         if topic_ros is not None:

@@ -213,7 +213,9 @@ class Outputs:
 
     decisions: a text file for JSON Lines; video: a VideoSink; stages: a folder for every
     stage of every frame; bag: a bags.BagRecorder (frames, if it records them); debug:
-    (publisher, message maker) for the debug image topic; show: a window; draw(detection,
+    (publisher, message maker(image, stamp, frame_id)) for the debug image topic, showing the
+    annotated picture or, by debug_stage, one stage's (a key of `pictures`: edges, masked,
+    mask_white, pieces, ...); watch: what else takes each record; show: a window; draw(detection,
     command, p): what makes the annotated picture (annotate: the lecture's); pictures(detection,
     command, p): the stages' (key, title, image) (lecture_pictures).
 
@@ -222,8 +224,11 @@ class Outputs:
     which and why ({'--decisions FILE': why}), for the run's last word and its exit status."""
 
     def __init__(self, p, decisions=None, video=None, stages=None, bag=None, debug=None,
-                 show=False, progress=None, draw=None, pictures=None, warn=None):
+                 show=False, progress=None, draw=None, pictures=None, warn=None,
+                 debug_stage='annotated', watch=()):
         self.p, self.decisions, self.video, self.stages = p, decisions, video, stages
+        self.debug_stage = debug_stage  # what the debug image shows: a picture's key
+        self.watch = list(watch)  # called with each frame's record (topics, diagnostics)
         self.stage_files = self.stage_bytes = 0  # what --stages has written
         self.bag, self.show, self.draw = bag, show, draw or annotate
         self.pictures = pictures or (lambda d, c, p: lecture_pictures(d, c, p, self.draw))
@@ -281,20 +286,34 @@ class Outputs:
 
             self._safely('decisions', write)
 
-    def frame(self, record, detection, command, t):
-        """A frame's record and pictures; True if the window's user pressed q."""
+    def wants_stages(self):
+        """Whether the next frame must keep its stages: --stages, or the debug image showing a
+        stage while someone looks."""
+        return bool(self.stages) or self._debug_shows_stage()
+
+    def _debug_shows_stage(self):
+        return (self.debug is not None and self.debug_stage != 'annotated' and
+                self.debug.get_num_connections() > 0)
+
+    def frame(self, record, detection, command, t, header=None):
+        """A frame's record and pictures; True if the window's user pressed q. header: (stamp
+        [s], frame_id) of the frame, for the debug image; default (t, 'camera')."""
         self._frame = record['frame']
         self.write(record)
-        if self.stages:
+        for take in self.watch:
+            take(record)
+        pictures = None
+        if (self.stages or self._debug_shows_stage()) and detection.stages is not None:
+            pictures = self.pictures(detection, command, self.p)
+        if self.stages and pictures is not None:
             def stages():
-                files, size = write_stages(self.stages, record['frame'],
-                                           self.pictures(detection, command, self.p))
+                files, size = write_stages(self.stages, record['frame'], pictures)
                 self.stage_files += files
                 self.stage_bytes += size
 
             self._safely('stages', stages)
         quit_pressed = False
-        sinks = self._picture_sinks(t)
+        sinks = self._picture_sinks(t, header or (t, 'camera'), pictures)
         if sinks or self.show:  # the annotated picture is drawn only when something takes it
             image = self.draw(detection, command, self.p)
             for sink, action in sinks:
@@ -305,14 +324,24 @@ class Outputs:
         self.progress.update(record['frame'] + 1)
         return quit_pressed
 
-    def _picture_sinks(self, t):
+    def _picture_sinks(self, t, header, pictures):
         sinks = []
         if self.video is not None:
             sinks.append(('video', self.video.write))
         if self.bag is not None and self.bag.images:
             sinks.append(('bag', lambda image: self.bag.image(t, image)))
         if self.debug is not None and self.debug.get_num_connections() > 0:
-            sinks.append(('debug', lambda image: self.debug.publish(self.debug_message(image))))
+            stage = None
+            if pictures is not None:
+                stage = next((image for key, _, image in pictures if key == self.debug_stage),
+                             None)
+                if stage is None:
+                    self._warn(f"debug_image '{self.debug_stage}' is no stage of this controller "
+                               f"(it has {', '.join(key for key, _, _ in pictures)}): the debug "
+                               'image shows the annotated frame')
+                    self.debug_stage = 'annotated'
+            sinks.append(('debug', lambda image: self.debug.publish(
+                self.debug_message(image if stage is None else stage, *header))))
         return sinks
 
     def record_twist(self, t, linear_x, angular_z):

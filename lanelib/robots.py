@@ -39,12 +39,14 @@ class Robot:
     name: str
     path: str
     settings: dict = field(default_factory=dict)  # setting name: value
+    via: str = ''  # the parameter it was read from, when a launch file loaded it there
 
     def describe(self):
         """'duckiebot (config/duckiebot.yaml): calibration duckiebot, lane duckietown, ...'"""
         where = os.path.relpath(self.path) if not self.path.startswith('..') else self.path
         what = ', '.join(f'{k} {v}' for k, v in self.settings.items()) or 'the defaults'
-        return f"'{self.name}' ({where}): {what}"
+        via = f', loaded into {self.via}' if self.via else ''
+        return f"'{self.name}' ({where}{via}): {what}"
 
 
 def preset_path(spec):
@@ -52,24 +54,32 @@ def preset_path(spec):
     return os.path.join(CONFIG, f'{spec}.yaml') if spec in BUILTIN else spec
 
 
-def load_robot(spec, known):
+def load_robot(spec, known, loaded=None):
     """The preset `spec` names (a built-in name or a YAML file); `known`: the setting names a
-    preset may set. RobotError says what is wrong."""
+    preset may set. loaded: the preset's mapping as the launch file's rosparam put it on the
+    parameter server (~robot_preset), used instead of reading the file. RobotError says what
+    is wrong."""
     path = preset_path(spec)
+    if loaded is not None:
+        return from_mapping(spec, path, loaded, known, '~robot_preset')
     if not os.path.isfile(path):
         raise RobotError(f"robot '{spec}' is neither a built-in preset ({', '.join(BUILTIN)}) "
                          'nor an existing file')
-    doc = read_yaml(path, RobotError, 'a robot preset')
+    return from_mapping(spec, path, read_yaml(path, RobotError, 'a robot preset'), known, path)
+
+
+def from_mapping(spec, path, doc, known, where):
+    """A Robot from a preset's mapping `doc` (None: empty), read from `where`."""
     if doc is None:
         doc = {}
     if not isinstance(doc, dict):
-        raise RobotError(f'{path}: a robot preset is a mapping of settings (name: value)')
+        raise RobotError(f'{where}: a robot preset is a mapping of settings (name: value)')
     allowed = set(known) | set(OTHERS)
     settings = {}
     for key, value in doc.items():
         if key not in allowed:
             guess = difflib.get_close_matches(str(key), allowed, n=1)
-            raise RobotError(f"{path}: unknown setting '{key}'"
+            raise RobotError(f"{where}: unknown setting '{key}'"
                              f"{f' (did you mean {guess[0]}?)' if guess else ''}; a preset holds "
                              "the node's settings by their names in --help")
         if key in PATHS and isinstance(value, str):
@@ -77,4 +87,4 @@ def load_robot(spec, known):
             value = beside if os.path.isfile(beside) else value
         settings[key] = value
     name = spec if spec in BUILTIN else os.path.splitext(os.path.basename(path))[0]
-    return Robot(name, path, settings)
+    return Robot(name, path, settings, '' if where == path else where)

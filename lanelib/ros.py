@@ -8,8 +8,7 @@ import os
 import threading
 import xmlrpc.client
 
-import cv2
-
+from lanelib.imagemsg import DEBUG_IMAGE, jpeg
 from lanelib.settings import load_yaml
 
 
@@ -186,16 +185,32 @@ class MasterWatch:
 
 
 def debug_publisher(rospy):
-    """~debug_image/compressed: the annotated frames, for rqt_image_view; the node builds them
-    only while something subscribes. Returns (publisher, message maker)."""
+    """~debug_image/compressed: the annotated frames (or a stage's, ~debug_image), for
+    rqt_image_view, each stamped with its frame's stamp and frame_id so that it matches its
+    frame in a bag; the node builds them only while something subscribes. Returns (publisher,
+    message maker(image, stamp [s], frame_id))."""
     from sensor_msgs.msg import CompressedImage
 
-    def message(image):
+    def message(image, stamp, frame_id):
         msg = CompressedImage()
-        msg.header.stamp = rospy.Time.now()
-        msg.header.frame_id = 'camera'
+        msg.header.stamp = rospy.Time.from_sec(stamp)
+        msg.header.frame_id = frame_id
         msg.format = 'jpeg'
-        msg.data = cv2.imencode('.jpg', image, [cv2.IMWRITE_JPEG_QUALITY, 80])[1].tobytes()
+        msg.data = jpeg(image)
         return msg
 
-    return rospy.Publisher('~debug_image/compressed', CompressedImage, queue_size=1), message
+    return rospy.Publisher('~' + DEBUG_IMAGE, CompressedImage, queue_size=1), message
+
+
+LECTURE_VELOCITY = 'mobile_base/commands/velocity'  # kobuki_node's input, in the node's namespace
+
+
+def velocity_topic(rospy):
+    """The name the node publishes its Twists on: cmd_vel when it is remapped (cmd_vel:=...,
+    <remap from="cmd_vel" .../> in a launch file), else the lecture's
+    mobile_base/commands/velocity, both in the node's namespace: /mobile_base/commands/velocity
+    for a node in the root namespace, as on the slides; /robot1/mobile_base/commands/velocity
+    under <group ns="robot1">."""
+    plain = rospy.names.ns_join(rospy.get_namespace(), 'cmd_vel')
+    remapped = rospy.resolve_name('cmd_vel') != plain
+    return rospy.resolve_name('cmd_vel' if remapped else LECTURE_VELOCITY)

@@ -68,6 +68,7 @@ def between(low, high, odd=False):
         return (math.isfinite(x) and low <= x <= high and
                 (not odd or (x == int(x) and int(x) % 2 == 1)))
     check.range = f"{'odd, ' if odd else ''}{low:g} to {high:g}"
+    check.bounds = (low, high)
     return check
 
 
@@ -76,6 +77,7 @@ def above(low, high):
     def check(x):
         return math.isfinite(x) and low < x <= high
     check.range = f'more than {low:g}, at most {high:g}'
+    check.bounds = (low, high)
     return check
 
 
@@ -93,6 +95,20 @@ def non_negative(x):
 
 def fraction(x):
     return math.isfinite(x) and 0 < x <= 1
+
+
+# the interval each plain check allows (its ends may be excluded): the bounds live tuning
+# offers (lanelib/tuning.py)
+positive.bounds = (0.0, math.inf)
+finite.bounds = (-math.inf, math.inf)
+non_negative.bounds = (0.0, math.inf)
+fraction.bounds = (0.0, 1.0)
+
+
+def bounds(field):
+    """(low, high) a row of a defaults table allows, from its check; infinite where it has
+    no end."""
+    return getattr(field.metadata['check'], 'bounds', (-math.inf, math.inf))
 
 
 def _kind(f):

@@ -1,6 +1,8 @@
 """Live ROS topics the node reads: a camera driver's images and camera_info, and odometry.
 
     --source ros:/camera/rgb/image_raw             sensor_msgs/Image (TopicSource)
+    --source ros:image image:=/camera/image_raw    a relative name, resolved in the node's
+                                                   namespace and remapped as ROS nodes are
     --source ros:/usb_cam/image_raw/compressed     sensor_msgs/CompressedImage (a topic ending
                                                    in /compressed, as image_transport names it)
     --calibration topic                            the camera_info beside the image topic
@@ -31,17 +33,19 @@ def topic_of(spec):
     return spec[len(PREFIX):] if spec.startswith(PREFIX) else None
 
 
-# a global ROS graph resource name: /, then words of letters, digits and _, each starting with
-# a letter, joined by /
-TOPIC_NAME = re.compile(r'^(/[A-Za-z][A-Za-z0-9_]*)+$')
+# a ROS graph resource name: words of letters, digits and _, each starting with a letter,
+# joined by /; global with a leading /, else relative (resolved in the node's namespace, and
+# remapped: ros:image with image:=/camera/rgb/image_raw)
+TOPIC_NAME = re.compile(r'^/?[A-Za-z][A-Za-z0-9_]*(/[A-Za-z][A-Za-z0-9_]*)*$')
 
 
 def topic_problem(topic):
     """Why `topic` (what follows ros:) is not a ROS topic the node can subscribe to, or None."""
     if TOPIC_NAME.match(topic):
         return None
-    return (f"'{PREFIX}{topic}' does not name a ROS topic: give a global name after ros:, "
-            "words of letters, digits and _ joined by /, e.g. ros:/camera/rgb/image_raw")
+    return (f"'{PREFIX}{topic}' does not name a ROS topic: give a name after ros:, words of "
+            "letters, digits and _ joined by /, e.g. ros:/camera/rgb/image_raw, or ros:image "
+            "remapped (image:=/camera/rgb/image_raw)")
 
 
 def info_topic(image_topic):
@@ -80,6 +84,7 @@ class TopicSource:
         self.name = PREFIX + topic
         self.fresh, self.wait = fresh, wait
         self.compressed = topic.rstrip('/').endswith('/compressed')
+        self.frame_id = ''  # the last frame's header.frame_id
         self.skipped = 0
         self._warn = warn or rospy.logwarn
         self._lock = threading.Lock()
@@ -121,6 +126,7 @@ class TopicSource:
                 except ImageMessageError as e:  # one bad message: skipped, said, counted
                     self._skip(e)
                     continue
+                self.frame_id = msg.header.frame_id  # the debug image's, beside its stamp
                 return True, frame, round(msg.header.stamp.to_sec(), 6)
             left = deadline - time.monotonic()
             if left <= 0:

@@ -60,6 +60,25 @@ def roscore(tmp_path_factory):
 
 
 @pytest.fixture
+def no_private_params(roscore):
+    """Private parameters stay on the master after a node ends (roslaunch, rosparam and
+    _name:=value set them there); each test that uses this starts without any of the nodes'
+    the tests run (/kobuki_lane, and in the namespaces robot1 and robot2)."""
+    import rospy
+
+    def clear():
+        for name in ('/kobuki_lane', '/robot1', '/robot2'):
+            try:
+                rospy.delete_param(name)
+            except KeyError:
+                pass
+
+    clear()
+    yield
+    clear()
+
+
+@pytest.fixture
 def twist_recorder(roscore):
     rec = TwistRecorder()
     yield rec

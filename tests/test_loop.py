@@ -3,6 +3,7 @@
 import io
 import json
 
+import cv2
 import numpy as np
 import pytest
 
@@ -312,8 +313,47 @@ def test_debug_images_are_built_only_while_someone_subscribes():
     debug = Debug([0, 0, 1, 1, 0, 0])
     ros = StandInRospy(SimClock(), quiet=True)
     p = LaneParams()
-    outputs = Outputs(p, debug=(debug, lambda image: image.shape), draw=draw)
+    outputs = Outputs(p, debug=(debug, lambda image, stamp, frame_id: image.shape), draw=draw)
     follower = LaneFollower(ros, ListSource(blank_frames(6)), LectureRule(p, camera=None),
                             SafeBase(ros, Twist), outputs)
     follower.run()
     assert len(built) == 2 and debug.sent == [(480, 640, 3)] * 2
+
+
+def test_the_debug_image_shows_the_stage_asked_for_stamped_as_its_frame():
+    """~debug_image edges: the Canny edges, not the annotated frame; each message carries its
+    frame's stamp and frame_id (a topic's frames are labelled with their header stamps)."""
+    class Debug:
+        def __init__(self):
+            self.sent = []
+
+        def get_num_connections(self):
+            return 1
+
+        def publish(self, msg):
+            self.sent.append(msg)
+
+    class StampedSource(ListSource):
+        frame_id = 'usb_cam'
+
+        def read(self):
+            ok, frame, label = super().read()
+            return ok, frame, (None if label is None else 100.5 + label)
+
+    debug = Debug()
+    ros = StandInRospy(SimClock(), quiet=True)
+    p = LaneParams()
+    frames = [np.zeros((480, 640, 3), np.uint8) for _ in range(2)]
+    for frame in frames:
+        cv2.line(frame, (100, 470), (300, 250), (255, 255, 255), 5)
+    outputs = Outputs(p, debug=(debug, lambda image, stamp, frame_id: (image, stamp, frame_id)),
+                      debug_stage='edges')
+    follower = LaneFollower(ros, StampedSource(frames), LectureRule(p, camera=None),
+                            SafeBase(ros, Twist), outputs)
+    follower.run()
+    assert [(stamp, frame_id) for _, stamp, frame_id in debug.sent] == [(100.5, 'usb_cam'),
+                                                                        (101.5, 'usb_cam')]
+    edges = cv2.Canny(cv2.GaussianBlur(cv2.cvtColor(frames[0], cv2.COLOR_BGR2GRAY), (5, 5), 0),
+                      85, 85)
+    image = debug.sent[0][0]
+    assert image.shape == (480, 640, 3) and np.array_equal(image[:, :, 0], edges)

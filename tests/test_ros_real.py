@@ -5,6 +5,7 @@ These tests never skip: without ROS they fail, because the stand-in must not dri
 
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -23,22 +24,7 @@ from tools.roslive import (
     stop_master,
 )
 
-
-@pytest.fixture(autouse=True)
-def no_private_params_from_earlier_tests(roscore):
-    """Private parameters stay on the master after a node ends (roslaunch and _name:=value set
-    them there); each test starts without any."""
-    import rospy
-
-    def clear():
-        try:
-            rospy.delete_param('/kobuki_lane')
-        except KeyError:
-            pass
-
-    clear()
-    yield
-    clear()
+pytestmark = pytest.mark.usefixtures('no_private_params')
 
 
 def run_node(roscore, args, timeout=60):
@@ -133,8 +119,10 @@ def roslaunch(roscore, cwd, source, *arguments, extra=''):
 def test_roslaunch_starts_the_node_with_its_launch_parameters(roscore, twist_recorder,
                                                               few_frames, tmp_path):
     decisions = tmp_path / 'launched.jsonl'
-    # threshold 0.5 in the launch file makes the rule turn where the default goes straight
-    proc = roslaunch(roscore, tmp_path, few_frames, 'threshold:=0.5', 'turn_angular:=0.3',
+    # threshold 0.5 in a parameter file makes the rule turn where the default goes straight
+    params = tmp_path / 'params.yaml'
+    params.write_text('threshold: 0.5\nturn_angular: 0.3\n')
+    proc = roslaunch(roscore, tmp_path, few_frames, f'params:={params}',
                      extra=f'--decisions {decisions} --wait-for-base 5')
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     records = read_jsonl(decisions)
@@ -239,7 +227,7 @@ def test_master_restart_holds_the_robot_then_reconnects(roscore, tmp_path):
             node.kill()
         stop_master(master)
     assert 'does not answer: robot held stopped' in err
-    assert 'is back: registered' in err and '/mobile_base/commands/velocity again' in err, err
+    assert re.search(r'is back: registered [^\n]*/mobile_base/commands/velocity', err), err
     assert 'Traceback' not in err
     records = read_jsonl(decisions)
     held = [r for r in records if r.get('held') == 'ROS master lost']
@@ -320,15 +308,18 @@ def test_ros_soak_holds_the_robot_through_master_crashes(tmp_path):
 
 
 def test_roslaunch_passes_the_lane_profile(roscore, few_frames, tmp_path):
-    """lane:= reaches the improved controller as ~lane, and mounting:= as ~mounting: a built-in
-    profile and the mounting file are used and named in the log, and a profile that does not
-    exist stops the node with its error."""
+    """A parameter file's lane (params:=FILE, loaded as private parameters) reaches the
+    improved controller as ~lane, and mounting:= as ~mounting: a built-in profile and the
+    mounting file are used and named in the log, and a profile that does not exist stops the
+    node with its error."""
     mounting = tmp_path / 'mounting.yaml'
     mounting.write_text('height: 0.1\npitch_deg: 21.5\nroll_deg: 0\nforward: 0.05\n')
 
     def launch(lane):
-        return roslaunch(roscore, tmp_path, few_frames, 'controller:=improved', f'lane:={lane}',
-                         f'mounting:={mounting}',
+        params = tmp_path / f'{lane}.yaml'
+        params.write_text(f'lane: {lane}\n')
+        return roslaunch(roscore, tmp_path, few_frames, 'controller:=improved',
+                         f'params:={params}', f'mounting:={mounting}',
                          extra=f"--decisions {tmp_path / (lane + '.jsonl')} --wait-for-base 0")
 
     proc = launch('duckietown')
