@@ -124,12 +124,12 @@ def calibration_camera(seeimg, camera=LECTURE_CAMERA):
     return cv2.undistort(seeimg, cam.matrix, cam.distortion, None, cam.matrix)
 
 
-def detect(frame, camera, p, keep_stages=False, roi=None):
+def detect(frame, camera, p, keep_stages=False):
     """One frame through the slides' calls, in the slides' order; a Detection.
 
-    roi: a mask (uint8, 255 = keep) to use instead of the algorithm's triangle (the improved
-    controller's floor band). keep_stages: keep every intermediate image, for pictures.
-    The node runs the same stages faster (lanelib/fast.py), with identical segments.
+    keep_stages: keep every intermediate image, for pictures. On a live camera the node runs
+    this on every frame; over files it runs the same stages faster (lanelib/fast.py), with
+    identical segments (--pipeline).
     """
     raw = as_bgr(frame)
     image = calibration_camera(raw, camera)  # 21:15
@@ -138,9 +138,7 @@ def detect(frame, camera, p, keep_stages=False, roi=None):
     blurred = cv2.GaussianBlur(gray, (p.blur_kernel, p.blur_kernel), 0)  # 21:44
     edged = cv2.Canny(blurred, p.canny_low, p.canny_high)  # 21:44
     height, width = edged.shape
-    if roi is not None:
-        masked = cv2.bitwise_and(edged, roi)
-    elif p.algorithm == '1.1':  # the triangle (21:44), with the lecture's function (20:44)
+    if p.algorithm == '1.1':  # the triangle (21:44), with the lecture's function (20:44)
         masked = region_of_interest(edged, region_of_interest_vertices(width, height))
     else:  # algorithm 1.0: the whole frame
         masked = edged
@@ -149,14 +147,12 @@ def detect(frame, camera, p, keep_stages=False, roi=None):
     stages = None
     if keep_stages:
         stages = dict(raw=raw, undistorted=image, gray=gray, blurred=blurred, edges=edged,
-                      roi=roi_picture(edged, p, roi), masked=masked)
+                      roi=roi_picture(edged, p), masked=masked)
     return Detection(lines, slopes, image, stages)
 
 
-def roi_picture(edged, p, roi=None):
+def roi_picture(edged, p):
     """The mask detect() applied, as a picture: 255 where edges are kept."""
-    if roi is not None:
-        return roi
     everything = np.full_like(edged, 255)
     if p.algorithm == '1.0':
         return everything
@@ -175,6 +171,7 @@ class LectureRule:
     detect() (lanelib/fast.py, tests/test_pipeline.py)."""
 
     name = 'lecture'
+    runs = 'the speed-up of detect(), the same segments'  # for the log line at start
 
     def __init__(self, p, camera=LECTURE_CAMERA, pipeline=None):
         self.p, self.camera = p, camera
@@ -221,8 +218,11 @@ def make_controller(name, params, camera=LECTURE_CAMERA, improved=None, pipeline
     """The lecture's rule (default) or the improved controller (lanelib/improved.py), whose
     lane memory follows `odometry` (lanelib/topics.py) while it comes."""
     if name == 'lecture':
-        return LectureRule(params, camera, slides_pipeline(params) if pipeline == 'slides'
+        rule = LectureRule(params, camera, slides_pipeline(params) if pipeline == 'slides'
                            else None)
+        rule.runs = ("detect(), the slides' calls" if pipeline == 'slides' else
+                     'the speed-up of detect(), the same segments')
+        return rule
     if name == 'improved':
         return ImprovedController(params, improved, camera, odometry=odometry)
     raise ValueError(f"controller must be lecture or improved, not '{name}'")
@@ -278,7 +278,7 @@ class LaneFollower:
         if late or held:
             command = STOP
         command = within_limits(command)  # what goes to the wheels, and so what is recorded
-        self.base.publish(command)
+        self.base.publish(command)  # the slides' pub.publish(thrust), through the safety layer
         self.controller.sent(command)  # what it steers on, not what it asked for
         record = decision_record(self.frames, label, detection, command, ros.get_time(),
                                  self.controller.extra())
@@ -324,11 +324,12 @@ class LaneFollower:
         ros, safety = self.ros, self.base.safety
         lost_since = None
         try:
+            # the slides' wait (while VARIABLE is None ...: rospy.sleep(1)), here for the base
             self.base.wait_for_subscriber(wait_for_base, self._stopping)
-            rate = ros.Rate(self.rate)
+            rate = ros.Rate(self.rate)  # the slides' rate = rospy.Rate(4)
             self.base.start_watchdog()
             while self.ended is None:
-                if ros.is_shutdown():
+                if ros.is_shutdown():  # the slides' rospy.is_shutdown() check
                     self.ended = 'ROS shutdown'
                     break
                 if self.stop_requested:
@@ -443,13 +444,15 @@ def build_parser():
                     help='on ROS, wait this long for a subscriber (the Kobuki base) before '
                          'the first command (default: 2)')
     io.add_argument('--controller', choices=('lecture', 'improved'), default=None,
-                    help="'lecture': the lecture's rule on theta (default); 'improved': lane "
-                         'offset and heading from the segments on the floor, PD steering '
-                         '(lanelib/improved.py)')
-    io.add_argument('--pipeline', choices=('fast', 'slides'), default='fast',
-                    help="how the lecture's controller runs the slides' stages: 'fast' "
-                         '(default) the speed-up with identical segments (lanelib/fast.py), '
-                         "'slides' detect() in this file on every frame, as on the slides")
+                    help="'lecture': the lecture's rule on theta (default); 'improved': the "
+                         "lane's offset, heading and curvature from the tape's colour on the "
+                         'floor, and one steering law (lanelib/improved.py)')
+    io.add_argument('--pipeline', choices=('auto', 'fast', 'slides'), default='auto',
+                    help="how the lecture's controller runs the slides' stages: 'slides' "
+                         'detect() in this file on every frame, as on the slides; '
+                         "'fast' the speed-up with identical segments (lanelib/fast.py); "
+                         "'auto' (default) slides on a live source (a camera, URL or ROS "
+                         'topic), fast over files, where frames come as fast as they can')
     add_arguments(parser.add_argument_group("the lecture's settings (defaults are the "
                                             "lecture's)"), LaneParams)
     add_arguments(parser.add_argument_group('the improved controller (--controller improved)'),

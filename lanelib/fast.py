@@ -35,15 +35,13 @@ class Layout:
     STRIPS = 8  # the band is undistorted in this many strips, each only as wide as the mask
     # needs there (tools/bench.py: more strips cost more in calls than they save in pixels)
 
-    def __init__(self, width, height, camera, roi, p):
+    def __init__(self, width, height, camera, p):
         self.key = (width, height, p.algorithm, p.blur_kernel)
-        self.camera, self.roi = camera, roi
+        self.camera = camera
         self.maps = None
         if camera is not None:
             self.maps = undistortion_maps(camera, width, height)
-        if roi is not None:
-            self.mask = roi
-        elif p.algorithm == '1.1':  # the lecture's function applied to an all-kept image
+        if p.algorithm == '1.1':  # the lecture's function applied to an all-kept image
             self.mask = region_of_interest(np.full((height, width), 255, np.uint8),
                                            region_of_interest_vertices(width, height))
         else:
@@ -127,9 +125,9 @@ class Layout:
                 best = two
         return best
 
-    def matches(self, width, height, camera, roi, p):
+    def matches(self, width, height, camera, p):
         return (self.key == (width, height, p.algorithm, p.blur_kernel)
-                and self.camera is camera and self.roi is roi)
+                and self.camera is camera)
 
     def undistort(self, raw):
         """The whole undistorted frame."""
@@ -152,7 +150,7 @@ class Layout:
 
 
 class FastPipeline:
-    """detect(frame, camera, p, keep_stages, roi), doing only the work that can change a
+    """detect(frame, camera, p, keep_stages), doing only the work that can change a
     segment (see the module's docstring).
 
     reference: kobuki_lane.detect, for what the band cannot do. mark: called after each stage
@@ -165,21 +163,21 @@ class FastPipeline:
         self.mark = mark or (lambda stage: None)
         self._layout = None
 
-    def layout(self, width, height, camera, roi):
-        if self._layout is None or not self._layout.matches(width, height, camera, roi, self.p):
-            self._layout = Layout(width, height, camera, roi, self.p)
+    def layout(self, width, height, camera):
+        if self._layout is None or not self._layout.matches(width, height, camera, self.p):
+            self._layout = Layout(width, height, camera, self.p)
         return self._layout
 
-    def __call__(self, frame, camera, keep_stages=False, roi=None):
+    def __call__(self, frame, camera, keep_stages=False):
         p, mark = self.p, self.mark
         if keep_stages or p.canny_low != p.canny_high:
-            return self.reference(frame, camera, p, keep_stages, roi)
+            return self.reference(frame, camera, p, keep_stages)
         mark('start')
         raw = as_bgr(frame)
         height, width = raw.shape[:2]
-        lay = self.layout(width, height, camera, roi)
+        lay = self.layout(width, height, camera)
         if lay.top == lay.bottom:  # the mask keeps nothing: no segment can be found
-            return self.reference(frame, camera, p, False, roi)
+            return self.reference(frame, camera, p, False)
         band = lay.undistort_band(raw)
         mark('undistort')
         lines = hough_lines(self.band_edges(band, lay), p)

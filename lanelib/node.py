@@ -121,7 +121,7 @@ def connect_to_ros(prog, args, private):
     """(ros, Twist, topic_ros) as lanelib.ros.connect makes them; exit 2 without a master,
     130 on Ctrl-C while one is looked for."""
     topic = topic_of(args.source)
-    live = args.realtime or args.source.isdigit() or '://' in args.source or topic
+    live = args.realtime or live_source(args.source)
     try:
         return connect(args.dry_run, live, topic and f'--source {topic}', private, args.quiet)
     except RosUnavailable as e:
@@ -129,6 +129,19 @@ def connect_to_ros(prog, args, private):
     except KeyboardInterrupt:
         say(f'{prog}: interrupted while connecting to the ROS master')
         raise SystemExit(130) from None
+
+
+def live_source(spec):
+    """Whether a --source is live (a camera index, a URL, a ROS topic), not files."""
+    return spec.isdigit() or '://' in spec or topic_of(spec) is not None
+
+
+def pipeline_for(args):
+    """--pipeline auto: detect() itself (the slides' calls) on a live source, where a frame
+    has a whole loop period; the speed-up with the same segments over files."""
+    if args.pipeline != 'auto':
+        return args.pipeline
+    return 'slides' if live_source(args.source) else 'fast'
 
 
 def set_up(prog, args, ros, topic_ros, lecture, make_controller):
@@ -159,7 +172,8 @@ def set_up(prog, args, ros, topic_ros, lecture, make_controller):
 
         odometry = (odometry_from(topic_ros, args.odom, clock=ros.get_time)
                     if name == 'improved' else None)
-        controller = make_controller(name, params, camera, improved, args.pipeline, odometry)
+        controller = make_controller(name, params, camera, improved, pipeline_for(args),
+                                     odometry)
         for warning in getattr(controller, 'warnings', list)():
             ros.logwarn('%s', warning)
         source = Peeked(open_source(args.source, warn=ros.logwarn, image_topic=args.image_topic,
@@ -185,7 +199,7 @@ def base_topic(args, ros):
 def started(ros, args, follower, params):
     """The log line at start: what runs, on what, how fast."""
     controller, lane = follower.controller, getattr(follower.controller, 'profile', None)
-    detail = ''
+    detail = f' ({controller.runs})' if hasattr(controller, 'runs') else ''
     if lane:
         p = controller.p
         detail = (f' (lane {lane.name}, {p.lane_width:g} m; camera {p.camera_height:g} m up, '

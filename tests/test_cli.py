@@ -599,3 +599,15 @@ def test_a_url_that_never_answers_says_it_waits_times_out_and_hears_ctrl_c(silen
     _, err = node.communicate(timeout=20)
     assert node.returncode == 130 and time.monotonic() - asked < 5
     assert 'interrupted while opening' in err and 'Traceback' not in err
+
+
+@pytest.mark.parametrize('source, pipeline, runs', [
+    ('samples/track', 'auto', 'fast'), ('run.mp4', 'auto', 'fast'), ('0', 'auto', 'slides'),
+    ('rtsp://cam/stream', 'auto', 'slides'), ('ros:/camera/image_raw', 'auto', 'slides'),
+    ('0', 'fast', 'fast'), ('samples/track', 'slides', 'slides')])
+def test_a_live_source_runs_detect_itself_and_files_the_speed_up(source, pipeline, runs):
+    from argparse import Namespace
+
+    from lanelib.node import pipeline_for
+
+    assert pipeline_for(Namespace(source=source, pipeline=pipeline)) == runs

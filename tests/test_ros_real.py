@@ -376,6 +376,8 @@ def test_a_live_image_topic_gives_the_folder_runs_decisions_then_a_silent_one_st
         in err and '/cam/camera_info' in err
     assert 'calibration from the first camera_info beside' in out
     assert 'fx=893.46' in out  # the intrinsics came from the topic
+    # on a live source the lecture's rule runs detect() itself, the slides' calls
+    assert "lecture controller (detect(), the slides' calls)" in out
     records = read_jsonl(decisions)
     decided = [r for r in records if 'error' not in r and r['source'] is not None]
     seen = {int(round(r['source'])) for r in decided}

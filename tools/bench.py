@@ -147,7 +147,7 @@ class Floor:
 
     def __init__(self, p, width=640, height=480):
         self.p = p
-        self.lay = Layout(width, height, LECTURE_CAMERA, None, p)
+        self.lay = Layout(width, height, LECTURE_CAMERA, p)
         m1, m2 = self.lay.maps
         # blur and Canny: the rectangles the pipeline splits the mask's rows into, without the
         # margins round them that make its edges right (with no mask: the whole frame)
