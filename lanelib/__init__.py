@@ -5,6 +5,7 @@ this package holds the rest, one room each. Nothing here imports kobuki_lane.py 
 a command line, or does anything at import time.
 
     settings       tables of defaults: unit, help and check per setting; flags and ROS params
+    files          YAML read as YAML 1.2 reads numbers; can an output be written
     cli            the command lines' shared conventions (exit status 2 on a usage error)
     node           the node's wiring: arguments to a running loop and back to an exit status
     robots         robot presets (--robot kobuki|duckiebot|FILE, config/*.yaml)
@@ -22,6 +23,7 @@ a command line, or does anything at import time.
     watch          live topics written: decision, lane estimate; /diagnostics
     tuning         live tuning with dynamic_reconfigure (rqt_reconfigure)
     rospy_standin  a headless stand-in for rospy, for dry runs and tests
+    standin_msgs   the message types it carries: Twist, Odometry
     improved       the improved controller (--controller improved): perceive, estimate, steer
     perception     its floor band, colour masks and tape pieces
     colour         colour masks in each frame's light, and the tape pieces they make

@@ -24,7 +24,7 @@ IMAGE_TYPES = ('sensor_msgs/msg/Image', 'sensor_msgs/msg/CompressedImage')
 DEBUG_TOPIC = '/kobuki_lane/' + DEBUG_IMAGE  # the node's, as a node named kobuki_lane has it
 
 
-class BagError(Exception):
+class BagError(ValueError):
     """A bag that cannot be used as asked; the message says what the bag has."""
 
 
@@ -74,7 +74,7 @@ class BagSource:
         self.topic = topic
         self.total = sum(c.msgcount for c in chosen)
         self._messages = self._reader.messages(connections=chosen)
-        self._first = self._next_frame(first=True)  # fails here, not mid-run, on a bad one
+        self._started = False  # a bad first frame is an error (sources.Peeked reads it at start)
 
     def _decode(self, conn, raw):
         msg = self._store.deserialize_ros1(raw, conn.msgtype)
@@ -84,22 +84,17 @@ class BagSource:
         except ImageMessageError as e:
             raise BagError(str(e)) from None
 
-    def _next_frame(self, first=False):
+    def read(self):
+        first, self._started = not self._started, True
         for conn, stamp, raw in self._messages:
             try:
                 return True, self._decode(conn, raw), round(stamp * 1e-9, 6)
             except BagError as e:
-                if first:
-                    raise  # the first frame: the bag cannot be used as asked, said at start
+                if first:  # the first frame: the bag cannot be used as asked, said at start
+                    raise
                 self.skipped += 1  # later ones: skipped, said, counted, as unreadable files
                 self._warn(f'skipped a frame at {stamp * 1e-9:.3f} s: {e}')
         return False, None, None
-
-    def read(self):
-        if self._first is not None:
-            item, self._first = self._first, None
-            return item
-        return self._next_frame()
 
     def release(self):
         self._reader.close()

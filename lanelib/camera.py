@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from lanelib.settings import read_yaml
+from lanelib.files import read_yaml
 
 
 class CalibrationError(ValueError):

@@ -6,7 +6,7 @@ import sys
 
 import cv2
 
-from lanelib.settings import output_problem
+from lanelib.files import output_problem
 from lanelib.topics import topic_of, topic_problem
 
 

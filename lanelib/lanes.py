@@ -27,7 +27,7 @@ import math
 import os
 from dataclasses import dataclass
 
-from lanelib.settings import read_yaml
+from lanelib.files import read_yaml
 
 COLOURS = ('white', 'yellow', 'any')
 STYLES = ('solid', 'dashed')

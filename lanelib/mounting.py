@@ -24,8 +24,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from lanelib.files import read_yaml
 from lanelib.geometry import Mounting
-from lanelib.settings import above, between, read_yaml
+from lanelib.settings import above, between
 
 KEYS = ('height', 'pitch_deg', 'roll_deg', 'forward')
 # the bounds of a mounting, in a file or as the improved controller's flags alike

@@ -21,7 +21,7 @@ import difflib
 import os
 from dataclasses import dataclass, field
 
-from lanelib.settings import read_yaml
+from lanelib.files import read_yaml
 
 CONFIG = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'config')
 BUILTIN = ('kobuki', 'duckiebot')

@@ -8,8 +8,8 @@ import os
 import threading
 import xmlrpc.client
 
+from lanelib.files import load_yaml
 from lanelib.imagemsg import DEBUG_IMAGE, jpeg
-from lanelib.settings import load_yaml
 
 
 class RosUnavailable(Exception):

@@ -2,8 +2,9 @@
 
 It offers only the calls kobuki_lane.py makes (init_node, Publisher, Subscriber, Rate, Timer,
 Duration, is_shutdown, on_shutdown, signal_shutdown, get_param, get_time, sleep,
-logdebug/loginfo/logwarn/logerr, ROSInterruptException) with rospy's semantics, and
-nav_msgs/Odometry for the simulator's odometry, on a clock you choose:
+logdebug/loginfo/logwarn/logerr, ROSInterruptException) with rospy's semantics, on a clock you
+choose (the message types it carries, Twist and Odometry, are in lanelib/standin_msgs.py and
+importable from here):
 
     SimClock()   simulated time: Rate.sleep() advances it instantly, firing timers on the way
                  (tests, fast dry runs, the simulator)
@@ -22,50 +23,8 @@ import sys
 import threading
 import time
 from collections import deque
-from dataclasses import dataclass, field
 
-
-@dataclass
-class Vector3:
-    x: float = 0.0
-    y: float = 0.0
-    z: float = 0.0
-
-
-@dataclass
-class Twist:
-    """geometry_msgs/Twist: linear [m/s] and angular [rad/s] velocity."""
-
-    linear: Vector3 = field(default_factory=Vector3)
-    angular: Vector3 = field(default_factory=Vector3)
-
-
-@dataclass
-class Quaternion:
-    x: float = 0.0
-    y: float = 0.0
-    z: float = 0.0
-    w: float = 1.0
-
-
-@dataclass
-class Pose:
-    position: Vector3 = field(default_factory=Vector3)
-    orientation: Quaternion = field(default_factory=Quaternion)
-
-
-@dataclass
-class PoseWithCovariance:
-    pose: Pose = field(default_factory=Pose)
-
-
-@dataclass
-class Odometry:
-    """nav_msgs/Odometry, as far as the lane memory reads it: pose.pose (position,
-    orientation), and twist.twist."""
-
-    pose: PoseWithCovariance = field(default_factory=PoseWithCovariance)
-    twist: Twist = field(default_factory=Twist)
+from lanelib.standin_msgs import Odometry, Pose, Quaternion, Twist, Vector3  # noqa: F401
 
 
 class ROSException(Exception):

@@ -24,8 +24,8 @@ import os
 from dataclasses import dataclass, field, replace
 
 from lanelib.camera import CAMERAS
+from lanelib.files import read_yaml
 from lanelib.geometry import Mounting
-from lanelib.settings import read_yaml
 from lanelib.sim.world import WORLDS, Scene, Track, World
 
 
