@@ -1,4 +1,4 @@
-"""samples/: small, regenerable, and what the README says the faithful rule decides on them."""
+"""samples/: small, regenerable, and what docs/usage.md says the faithful rule decides on them."""
 
 import collections
 import json
@@ -52,8 +52,8 @@ def parse_cell(cell):
 
 
 @pytest.mark.parametrize('region', 'ABC')
-def test_readme_table_is_what_the_rule_decides(region, tmp_path):
-    with open(os.path.join(REPO, 'README.md'), encoding='utf-8') as f:
+def test_the_usage_docs_table_is_what_the_rule_decides(region, tmp_path):
+    with open(os.path.join(REPO, 'docs', 'usage.md'), encoding='utf-8') as f:
         row = next(line for line in f if line.startswith(f'| {REGIONS[region]} |'))
     cells = [c.strip() for c in row.strip().strip('|').split('|')]
     for algorithm, cell in (('1.1', cells[2]), ('1.0', cells[4])):
