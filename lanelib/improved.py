@@ -187,6 +187,7 @@ class ImprovedController:
         self.dt = 1.0 / lane_params.rate
         self.view = None  # the FloorView of the frames' size
         self.cluttered = False  # the last frame had more than max_pieces pieces of line
+        self.ever_seen = False  # a lane has been seen since the start (reset() keeps it)
         self.reset()
 
     def tuned_settings(self):
@@ -287,9 +288,12 @@ class ImprovedController:
         self.mark('lane')
         self.sides = None if fit is None else fit.sides
         blind = self.lost_for > p.lost_timeout  # the estimate from before is stale
-        if blind and meas is not None and abs(meas.across) > REGAINED * w:
+        # a lane found after one was lost must be the one lost (the robot cannot have left it
+        # without a departure); before any lane was seen there is none to lose
+        if blind and self.ever_seen and meas is not None and abs(meas.across) > REGAINED * w:
             meas = None  # another lane (the far leg of a U-turn): keep searching
         if meas is not None:
+            self.ever_seen = True
             self.lost_for, self.search = 0.0, None
             self.estimate = blend(prior, meas, p.smoothing * meas.confidence) if (
                 prior and not blind) else meas

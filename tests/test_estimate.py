@@ -67,6 +67,40 @@ def test_a_lane_the_robot_would_be_far_outside_is_not_its_own():
     assert est is None
 
 
+def test_a_lane_found_after_one_was_lost_must_be_the_one_lost_but_a_first_lane_is_taken():
+    """After a lane was seen and lost, a lane the robot stands outside of (the far leg of a
+    U-turn) is not taken for it; a controller that has seen no lane yet (a node started
+    beside its lane, a single picture) takes the lane it finds."""
+    from types import SimpleNamespace
+
+    from kobuki_lane import LaneParams
+    from lanelib.improved import REGAINED, ImprovedController
+
+    w = DT.lane_width
+    off = -0.9 * w  # beyond REGAINED (0.75 lane widths) from the robot
+    assert 0.9 > REGAINED
+    beside = SimpleNamespace(cluttered=False, pieces=line_pieces(off + w / 2, 'yellow',
+                                                                 dashed=True) +
+                             line_pieces(off - w / 2, 'white'))
+    own = SimpleNamespace(cluttered=False, pieces=line_pieces(w / 2, 'yellow', dashed=True) +
+                          line_pieces(-w / 2, 'white'))
+    nothing = SimpleNamespace(cluttered=False, pieces=[])
+    params = ImprovedParams(lane='duckietown', search_angle=0.0)
+
+    fresh = ImprovedController(LaneParams(), params)
+    fresh(beside, 0.0)
+    assert fresh.lost_for == 0.0 and fresh.estimate.offset == pytest.approx(-off, abs=0.01)
+
+    seen = ImprovedController(LaneParams(), params)
+    seen(own, 0.0)
+    t = 0.0
+    while t < 1.5:  # lost for longer than lost_timeout (1 s)
+        t += 0.25
+        seen(nothing, t)
+    seen(beside, t + 0.25)
+    assert seen.lost_for > 1.5  # still lost: not taken for the lane it lost
+
+
 def slanted_pieces(intercept, psi, colour, along=(0.1, 0.6), step=0.08):
     """Pieces of a straight line crossing the robot's sideways axis at `intercept` [m] and
     heading psi [rad] (+ left), over x from along[0] to along[1]."""
