@@ -64,7 +64,8 @@ def bounds(field):
     return getattr(field.metadata['check'], 'bounds', (-math.inf, math.inf))
 
 
-def _kind(f):
+def value_type(f):
+    """The Python type of a row's values: str, int or float."""
     name = f.type if isinstance(f.type, str) else f.type.__name__
     return {'str': str, 'int': int}.get(name, float)
 
@@ -93,7 +94,7 @@ def validate(params, origins=None):
 def add_arguments(group, table):
     """A --flag for every row of `table` (a dataclass), defaulting to None (not given)."""
     for f in dataclasses.fields(table):
-        meta, kind = f.metadata, _kind(f)
+        meta, kind = f.metadata, value_type(f)
         unit = f' [{meta["unit"]}]' if meta['unit'] else ''
         default = f.default if kind is str else f'{f.default:g}'
         within = getattr(meta['check'], 'range', None)
@@ -122,7 +123,7 @@ def resolve(table, args, get_param, layers=()):
         came[f.name] = ('--' + f.name.replace('_', '-') if flag is not None else
                         PARAMETER.format(name=f.name) if value is not fallback else
                         layer[1] if layer else None)
-        kind = _kind(f)
+        kind = value_type(f)
         if kind in (int, float) and isinstance(value, str):
             value = _number(value)  # a number as text: a launch file's str, or 1e3 for rospy
         if kind in (int, float) and (isinstance(value, bool) or

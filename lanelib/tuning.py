@@ -1,8 +1,8 @@
 """Live tuning on ROS: a dynamic_reconfigure server for the settings the lecture says are found
 by trying (its threshold, Canny, Hough and speeds) and the improved controller's gains and
 speeds. Change them in rqt_reconfigure (`rosrun rqt_reconfigure rqt_reconfigure`) or with
-`rosrun dynamic_reconfigure dynparam set /kobuki_lane threshold 8`; a change takes effect on the
-next frame and is logged.
+`rosservice call /kobuki_lane/set_parameters "config: {doubles: [{name: threshold, value: 8}]}"`
+(Debian's dynparam script does not run); a change takes effect on the next frame and is logged.
 
 The description is made from the defaults tables when the node starts (name, help, unit,
 range, and the value the run started with as the default), so no .cfg file writes them again
@@ -16,7 +16,7 @@ import dataclasses
 import math
 import threading
 
-from lanelib.settings import bounds, validate
+from lanelib.settings import bounds, validate, value_type
 
 LECTURE = ('threshold', 'canny_low', 'canny_high', 'hough_threshold', 'min_line_length',
            'max_line_gap', 'slope_min', 'turn_linear', 'turn_angular', 'straight_linear')
@@ -27,8 +27,7 @@ TYPES = {int: 'int', float: 'double'}
 
 def parameter(field, value, level):
     """One dynamic_reconfigure parameter description for a row of a defaults table."""
-    kind = {'int': int, 'float': float}.get(field.type if isinstance(field.type, str)
-                                             else field.type.__name__, float)
+    kind = value_type(field)
     low, high = bounds(field)
     if kind is int:  # dynamic_reconfigure's int is 32 bits
         low, high = int(max(low, -2 ** 31)), int(min(high, 2 ** 31 - 1))
