@@ -36,6 +36,7 @@ class LaneEstimate:
     reach: float = 1.0  # [m] mean distance ahead of the points the fit rests on
     points: tuple = None  # the centre-line points the fit rests on: x, y, weight (robot frame)
     width: float = None  # [m] between the lines, as measured
+    bend: tuple = None  # (s0 [m], k2 [1/m]): from s0 along it the lane bends k2 (lanefit)
 
     @property
     def offset(self):  # robot left of the lane centre [m]
@@ -59,8 +60,8 @@ class LaneEstimate:
 
     def point_at(self, distance):
         """(x, y, heading) of the centre line `distance` [m] from the robot, following it as
-        the arc it starts as (a polynomial in x cannot turn 90 degrees)."""
-        return LaneFit(self.arc, None, 0, 0, None).point_at(distance)
+        the arc it starts as, and the bend after (a polynomial in x cannot turn 90 degrees)."""
+        return LaneFit(self.arc, None, 0, 0, None, bend=self.bend).point_at(distance)
 
     def lateral_at(self, distance):
         """How far to the left [m] the centre line lies `distance` metres from the robot."""
@@ -82,7 +83,7 @@ def measure(pieces, profile, p, prior=None, anchor=None):
     cx, _, cw = fit.centre
     return LaneEstimate(fit.e, b, fit.k * (1 + b * b) ** 1.5 / 2, confidence,
                         int(np.sum(fit.sides == 1)), int(np.sum(fit.sides == -1)),
-                        float(np.average(cx, weights=cw)), fit.centre, fit.width), fit
+                        float(np.average(cx, weights=cw)), fit.centre, fit.width, fit.bend), fit
 
 
 def predict(est, ds, dtheta):
@@ -93,12 +94,18 @@ def predict(est, ds, dtheta):
     b = est.b + 2 * est.c * ds - dtheta * (1 + est.b ** 2)
     if not (math.isfinite(a) and math.isfinite(b) and abs(b) < math.tan(TURNED)):
         return None
-    return replace(est, a=a, b=b, confidence=est.confidence * FORGET)
+    c, bend = est.c, est.bend
+    if bend is not None:  # the bend comes nearer; driven into, its curvature is the lane's
+        bend = (bend[0] - ds, bend[1])
+        if bend[0] <= 0:
+            c, bend = bend[1] * (1 + b * b) ** 1.5 / 2, None
+    return replace(est, a=a, b=b, c=c, confidence=est.confidence * FORGET, bend=bend)
 
 
 def blend(pred, meas, weight):
-    """The prediction moved `weight` (0..1) of the way to the measurement."""
+    """The prediction moved `weight` (0..1) of the way to the measurement; where the lane
+    bends ahead, as measured."""
     return LaneEstimate(pred.a + weight * (meas.a - pred.a), pred.b + weight * (meas.b - pred.b),
                         pred.c + weight * (meas.c - pred.c),
                         pred.confidence + weight * (meas.confidence - pred.confidence),
-                        meas.left, meas.right, meas.reach, width=meas.width)
+                        meas.left, meas.right, meas.reach, width=meas.width, bend=meas.bend)

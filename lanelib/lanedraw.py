@@ -12,6 +12,7 @@ import cv2
 import numpy as np
 
 from lanelib.geometry import floor_to_pixels
+from lanelib.lanefit import centre_path
 from lanelib.outputs import draw_curve, text_band, tint
 from lanelib.stages import as_bgr
 
@@ -19,15 +20,9 @@ SIDE_COLOURS = {0: (0, 255, 0), 1: (0, 160, 255), -1: (255, 128, 0)}  # BGR: cen
 
 
 def arc_points(estimate, lengths, offset=0.0):
-    """Points (x, y) of the estimate's centre line at arc lengths `lengths`, moved `offset` [m]
-    to its left."""
-    e, psi, k = estimate.arc
-    h = psi + k * lengths
-    if abs(k) < 1e-4:
-        x, y = lengths * math.cos(psi), e + lengths * math.sin(psi)
-    else:
-        x = (np.sin(h) - math.sin(psi)) / k
-        y = e + (math.cos(psi) - np.cos(h)) / k
+    """Points (x, y) of the estimate's centre line (its arc, and its bend ahead) at arc
+    lengths `lengths`, moved `offset` [m] to its left."""
+    x, y, h = centre_path(estimate.arc, lengths, estimate.bend)
     return x - offset * np.sin(h), y + offset * np.cos(h)
 
 

@@ -17,6 +17,11 @@ running across the fitted lane's lines where it lies (over ASKEW) is on neither.
 neighbouring lane's lines, a centre line the robot is crossing, a line of the wrong colour on
 a side, are not its lane's, and one line alone still places the lane, half a lane width beside
 it, on the side it was.
+
+Where the lane's curvature changes in view (a bend's entry seen from its straight, an S-bend's
+turn the other way), the lane kept is refitted as two arcs, the second going on from the first
+(a bend: where, and its curvature), when they fit its pieces much better: one arc through the
+robot fits such a lane only turned away from it at the robot.
 """
 
 import math
@@ -30,6 +35,14 @@ SEED_CURVATURES = (0.0, -0.5, 0.5, -1.0, 1.0, -2.0, 2.0)  # [1 / lane width]
 ITERATIONS = 4  # Gauss-Newton steps per fitting round
 PRIOR_PULL = 0.03  # [of the line in view] pull towards the expected offset and heading
 ASKEW = math.radians(30)  # a piece turned more than this from its line is not on it
+# where a second arc may take over from the first (a bend's entry or exit, an S-bend's turn
+# the other way), as fractions of the way from the nearest to the furthest of the lane's points
+# ahead (where the fit starts from: it moves), and how much better it must fit to be kept: the
+# weighted squared distances of the lane's points at most this fraction of the one arc's
+BEND_STARTS = (0.25, 0.5, 0.75)
+BEND_GAIN = 0.5
+BEND_MIN = 0.1  # [1 / lane width] a smaller change of curvature is no bend
+BEND_FLOOR = 0.01  # [lane widths] one arc as near its points as this (RMS) needs no bend
 
 
 def signed_distance(x, y, e, psi, k):
@@ -47,6 +60,47 @@ def robot_offset(e, psi, k):
     itself (e cos psi on a straight lane), so a robot well inside a lane it is turning into would
     be judged outside it by e."""
     return -signed_distance(0.0, 0.0, e, psi, k)
+
+
+def centre_path(arc, lengths, bend=None):
+    """(x, y, heading) arrays of the centre line at arc lengths `lengths` [m] from where it
+    crosses the robot's sideways axis: the arc (e, psi, k), and with a bend (s0, k2) from s0
+    on the arc of curvature k2 that goes on from it."""
+    e, psi, k = arc
+    lengths = np.asarray(lengths, float)
+    x, y, h = _along_arc(0.0, e, psi, k, lengths)
+    if bend is not None:
+        s0, k2 = bend
+        x0, y0, h0 = _along_arc(0.0, e, psi, k, np.array([s0]))
+        x2, y2, h2 = _along_arc(x0[0], y0[0], h0[0], k2, lengths - s0)
+        later = lengths > s0
+        x, y, h = np.where(later, x2, x), np.where(later, y2, y), np.where(later, h2, h)
+    return x, y, h
+
+
+def _along_arc(x0, y0, h0, k, lengths):
+    """(x, y, heading) `lengths` [m] along the arc of curvature k from (x0, y0) heading h0."""
+    h = h0 + k * lengths
+    if abs(k) < 1e-4:
+        return x0 + lengths * math.cos(h0), y0 + lengths * math.sin(h0), h
+    return (x0 + (np.sin(h) - math.sin(h0)) / k, y0 + (math.cos(h0) - np.cos(h)) / k, h)
+
+
+def bent_distance(x, y, arc, bend):
+    """signed_distance from the centre line that is the arc (e, psi, k) up to s0 along it and
+    the arc of curvature k2 after (bend: (s0, k2)): a point is the second arc's when its
+    nearest point on the first arc's circle lies beyond s0."""
+    e, psi, k = arc
+    s0, k2 = bend
+    (x0,), (y0,), (h0,) = _along_arc(0.0, e, psi, k, np.array([s0]))
+    return np.where(_along(x, y, e, psi, k) > s0, _distance(x - x0, y, y0, h0, k2)[0],
+                    _distance(x, y, e, psi, k)[0])
+
+
+def _along(x, y, e, psi, k):
+    """How far along the arc (e, psi, k) [m] the points' nearest points on its circle lie."""
+    u, v, _, _ = _arc_frame(x, y, e, psi)
+    return u if abs(k) < 1e-9 else np.arctan2(k * u, 1 - k * v) / k
 
 
 def _arc_frame(x, y, e, psi):
@@ -110,11 +164,12 @@ def fit_lanes(x, y, sides, w, lanes, priors, limits, iterations=ITERATIONS):
 class LaneFit:
     """The lane found: arc (e, psi, k) and its width between the line centres as the lines
     show it; per piece its side (+1 left, -1 right, 0 not the lane's); the lengths of line on
-    each side [m]; and the centre-line points the pieces give (x, y, weight)."""
+    each side [m]; the centre-line points the pieces give (x, y, weight); and where the lane's
+    curvature changes, if it does: bend (s0 [m] along it, k2 [1/m] after), else None."""
 
-    def __init__(self, arc, sides, left, right, centre, width=None):
+    def __init__(self, arc, sides, left, right, centre, width=None, bend=None):
         self.e, self.psi, self.k = arc[:3]
-        self.width = width
+        self.width, self.bend = width, bend
         self.sides, self.left, self.right, self.centre = sides, left, right, centre
 
     @property
@@ -125,14 +180,9 @@ class LaneFit:
         """(x, y, heading) of the centre line at `distance` [m] from the robot, along it; on
         a circle too small to reach that far, its point furthest from the robot (half way
         round: the way the lane goes; going on round would come back beside the robot)."""
-        psi, k = self.psi, self.k
-        s = np.linspace(0.0, min(3.0 * distance, 2 * math.pi / max(abs(k), 1e-9)) + 1e-6, 400)
-        if abs(k) < 1e-4:
-            x, y, h = s * math.cos(psi), self.e + s * math.sin(psi), np.full_like(s, psi)
-        else:
-            h = psi + k * s
-            x = (np.sin(h) - math.sin(psi)) / k
-            y = self.e + (math.cos(psi) - np.cos(h)) / k
+        k = max(abs(self.k), abs(self.bend[1]) if self.bend else 0.0)
+        s = np.linspace(0.0, min(3.0 * distance, 2 * math.pi / max(k, 1e-9)) + 1e-6, 400)
+        x, y, h = centre_path((self.e, self.psi, self.k), s, self.bend)
         reach = np.hypot(x, y)
         far = reach >= distance
         i = int(np.argmax(far)) if far.any() else int(np.argmax(reach))
@@ -241,7 +291,7 @@ def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tole
             _, lane, sides, support = found
             if (1 in sides and -1 in sides and abs(robot_offset(*lane[:3])) <= lane[3] / 2 and
                     support >= explained * total):
-                return _lane(pieces, found)
+                return _lane(pieces, found, points, priors, limits, lane_width)
     seeds = [] if prior is None else [(*prior, lane_width)]
     for piece, (may_left, may_right) in zip(pieces, allowed):
         x0, y0 = piece.summary[0][1], piece.summary[1][1]
@@ -249,7 +299,7 @@ def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tole
             e = y0 - side * half / math.cos(piece.phi) - math.tan(piece.phi) * x0
             seeds += [(e, piece.phi, k / lane_width, lane_width) for k in SEED_CURVATURES]
     found = _fit_seeds(np.array(seeds, float), *search)
-    return None if found is None else _lane(pieces, found)
+    return None if found is None else _lane(pieces, found, points, priors, limits, lane_width)
 
 
 def _fit_seeds(seeds, pieces, points, allowed, lane_width, priors, limits, regions=None,
@@ -292,27 +342,130 @@ def _fit_seeds(seeds, pieces, points, allowed, lane_width, priors, limits, regio
     return score[best], lanes[best], sides[best], float(left[best] + right[best])
 
 
-def _lane(pieces, found):
+def _lane(pieces, found, points, priors, limits, lane_width):
+    """The LaneFit of the lane found (_fit_seeds), with a bend where one fits its points
+    better (_fit_bend)."""
     _, lane, sides, _ = found
+    bend = _fit_bend(points, np.repeat(sides, POINTS), lane, lane_width, priors, limits)
+    if bend is not None:
+        lane, bend = bend
     lengths = [sum(p.length for p, s in zip(pieces, sides) if s == side) for side in (1, -1)]
     return LaneFit(lane, sides, lengths[0], lengths[1],
-                   _centre_points(pieces, sides, lane[:3], lane[3] / 2), float(lane[3]))
+                   _centre_points(pieces, sides, lane[:3], lane[3] / 2, bend), float(lane[3]),
+                   bend)
 
 
-def _centre_points(pieces, sides, arc, half):
-    """The lane's pieces moved half a lane width towards the centre line, across the arc."""
+def _fit_bend(points, on, lane, lane_width, priors, limits):
+    """(lane (e, psi, k, width), bend (s0, k2)) of the centre line as two arcs, the second
+    taking over s0 along the first, fitted to the lane's points (on: each point's side), when
+    the one arc misses them by more than BEND_FLOOR (RMS) and the two leave at most BEND_GAIN
+    of its weighted squared distances, change the curvature by at least BEND_MIN, keep the
+    lane's lines on its pieces and the robot no further out of it; else None. A bend's entry
+    seen from its straight, an S-bend's turn the other way: one arc through the robot fits
+    such a lane only turned away from it at the robot. Levenberg-Marquardt in (e, psi, k, k2,
+    s0, width) from s0 at BEND_STARTS, each from the one arc and from parabolas through the
+    points before and after s0; the one arc's priors, k2 and s0 free; derivatives by
+    differences."""
+    x, y, w = points
+    w = (on != 0) * w
+    seen = x[w > 0]
+    if seen.size < 2 * POINTS:
+        return None
+    pull, target = (np.insert(np.asarray(v, float), 3, (0.0, 0.0)) for v in priors)
+    pull += 1e-9
+    if limits[0] == limits[1]:
+        pull[5] = 1e12  # no step in the width
+    steps = (1e-6, 1e-6, 1e-4, 1e-4, 1e-5)
+
+    def residual(q):
+        return bent_distance(x, y, q[:3], (q[4], q[3])) - on * q[5] / 2
+
+    def cost(q):
+        r = residual(q)
+        return float(w @ r ** 2 + pull @ (q - target) ** 2), r
+
+    one = float(w @ (_distances(x, y, lane[None, :])[0][0] - on * lane[3] / 2) ** 2)
+    if one <= w.sum() * (BEND_FLOOR * lane_width) ** 2:
+        return None  # the one arc fits: nothing to gain
+    e, psi, k, width = lane
+    best = (math.inf, None)
+    for s0 in seen.min() + np.array(BEND_STARTS) * np.ptp(seen):
+        starts = [np.array([e, psi, k, k, s0, width])]
+        near, far = (x < s0) & (w > 0), (x >= s0) & (w > 0)
+        if np.count_nonzero(near) >= 2 * POINTS:  # before s0 a line or a parabola, after
+            a, slope, k1 = _parabola(x[near], (y - on * width / 2)[near], w[near])
+            k2 = _parabola(x[far], (y - on * width / 2)[far], w[far])[2] if (
+                np.count_nonzero(far) >= 3 * POINTS) else k
+            starts.append(np.array([a, math.atan(slope), k1, k2, s0, width]))
+        for q in starts:
+            c, r, damping = *cost(q), 1e-3
+            for _ in range(3 * ITERATIONS):
+                jac = np.empty((len(x), 6))
+                for i, step in enumerate(steps):
+                    moved = q.copy()
+                    moved[i] += step
+                    jac[:, i] = (residual(moved) - r) / step
+                jac[:, 5] = -on / 2
+                wj = jac.T * w
+                normal = wj @ jac + np.diag(pull)
+                trial = q - np.linalg.solve(normal + damping * np.diag(np.diag(normal)),
+                                            wj @ r + pull * (q - target))
+                trial[1] = np.clip(trial[1], -1.4, 1.4)
+                trial[2:4] = np.clip(trial[2:4], -30.0, 30.0)
+                trial[4] = np.clip(trial[4], seen.min(), seen.max())
+                trial[5] = np.clip(trial[5], *limits)
+                c_trial, r_trial = cost(trial)
+                if c_trial < c:
+                    q, c, r, damping = trial, c_trial, r_trial, damping / 3
+                else:
+                    damping *= 10
+            best = min(best, (c, q), key=lambda b: b[0])
+    _, q = best
+    r = residual(q)
+    off = np.abs(r.reshape(-1, POINTS).mean(axis=1))[on[::POINTS] != 0]
+    if (float(w @ r ** 2) > BEND_GAIN * one or abs(q[3] - q[2]) * lane_width < BEND_MIN or
+            np.any(off > TOLERANCES[-1] * lane_width) or
+            abs(robot_offset(*q[:3])) > max(q[5] / 2, abs(robot_offset(*lane[:3])))):
+        return None
+    return np.delete(q, (3, 4)), (float(q[4]), float(q[3]))
+
+
+def _parabola(x, y, w):
+    """(y at x = 0, slope there, curvature in the middle) of the weighted least-squares
+    parabola through points, a line for fewer than 3 * POINTS of them."""
+    if len(x) < 3 * POINTS:
+        slope, a = np.polyfit(x, y, 1, w=np.sqrt(w))
+        return a, slope, 0.0
+    c, b, a = np.polyfit(x, y, 2, w=np.sqrt(w))
+    middle = b + 2 * c * np.average(x, weights=w)
+    return a, b, 2 * c / (1 + middle ** 2) ** 1.5
+
+
+def _left_normals(x, y, x0, y0, h0, k):
+    """The left normal of the arc of curvature k from (x0, y0) heading h0, at the points
+    nearest (x, y) on its circle (towards the circle's centre for a left bend)."""
+    if abs(k) < 1e-4:
+        return np.full(len(x), -math.sin(h0)), np.full(len(x), math.cos(h0))
+    cx, cy = x0 - math.sin(h0) / k, y0 + math.cos(h0) / k
+    dx, dy = cx - x, cy - y
+    r = np.maximum(np.hypot(dx, dy), 1e-9)
+    return math.copysign(1.0, k) * dx / r, math.copysign(1.0, k) * dy / r
+
+
+def _centre_points(pieces, sides, arc, half, bend=None):
+    """The lane's pieces moved half a lane width towards the centre line, across it."""
     xs, ys, ws = [], [], []
     e, psi, k = arc
+    if bend is not None:
+        (x0,), (y0,), (h0,) = centre_path(arc, [bend[0]])
     for piece, side in zip(pieces, sides):
         if not side:
             continue
-        if abs(k) < 1e-4:
-            nx, ny = np.full(len(piece.x), -math.sin(psi)), np.full(len(piece.x), math.cos(psi))
-        else:  # the left normal at each point: towards the circle's centre for a left bend
-            cx, cy = -math.sin(psi) / k, e + math.cos(psi) / k
-            dx, dy = cx - piece.x, cy - piece.y
-            r = np.maximum(np.hypot(dx, dy), 1e-9)
-            nx, ny = math.copysign(1.0, k) * dx / r, math.copysign(1.0, k) * dy / r
+        nx, ny = _left_normals(piece.x, piece.y, 0.0, e, psi, k)
+        if bend is not None:
+            later = _along(piece.x, piece.y, e, psi, k) > bend[0]
+            nx2, ny2 = _left_normals(piece.x, piece.y, x0, y0, h0, bend[1])
+            nx, ny = np.where(later, nx2, nx), np.where(later, ny2, ny)
         xs.append(piece.x - side * half * nx)
         ys.append(piece.y - side * half * ny)
         ws.append(piece.w)

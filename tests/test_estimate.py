@@ -7,10 +7,11 @@ import math
 import numpy as np
 import pytest
 
+from lanelib import lanefit
 from lanelib.colour import Piece
 from lanelib.estimate import LaneEstimate, blend, measure, predict
 from lanelib.improved import ImprovedParams
-from lanelib.lanefit import robot_offset
+from lanelib.lanefit import bent_distance, centre_path, robot_offset, signed_distance
 from lanelib.lanes import BUILTIN
 from lanelib.memory import LaneMemory
 from lanelib.robot import arc_step
@@ -123,6 +124,54 @@ def test_a_lane_running_across_the_view_with_the_robot_inside_it_is_the_robots()
     assert math.degrees(est.heading) == pytest.approx(68, abs=2)
 
 
+def path_pieces(arc, bend, side, colour, lengths=(0.12, 0.8), step=0.06):
+    """Pieces of the lane's line on `side` (+1 left, -1 right) of the centre line arc + bend
+    (lanefit.centre_path), between arc lengths lengths[0] and lengths[1]."""
+    pieces, half = [], DT.lane_width / 2
+    for s0 in np.arange(lengths[0], lengths[1], step):
+        x, y, h = centre_path(arc, np.linspace(s0, s0 + step, 20), bend)
+        x, y = x - side * half * np.sin(h), y + side * half * np.cos(h)
+        pieces.append(Piece(x, y, float(np.mean(h)), colour, step, 0.03))
+    return pieces
+
+
+def test_the_bent_centre_line_is_the_arc_until_the_bend_and_goes_on_from_it():
+    x, y = np.array([0.2, 0.5, 0.9]), np.array([0.05, -0.1, 0.3])
+    arc = (0.02, 0.1, 1.5)
+    # the same curvature after the bend: the one arc
+    assert bent_distance(x, y, arc, (0.3, 1.5)) == pytest.approx(signed_distance(x, y, *arc))
+    s = np.array([0.3 - 1e-6, 0.3 + 1e-6, 0.5])
+    px, py, h = centre_path(arc, s, (0.3, -4.0))
+    assert (px[1], py[1]) == pytest.approx((px[0], py[0]), abs=1e-5)  # no jump
+    assert h[2] - h[1] == pytest.approx(-4.0 * 0.2, abs=1e-4)  # bending k2 after
+    # a point on the second arc is at distance 0 from the bent line, not from the one arc
+    assert bent_distance(px[2:], py[2:], arc, (0.3, -4.0)) == pytest.approx([0.0], abs=1e-9)
+    assert abs(signed_distance(px[2:], py[2:], *arc)[0]) > 0.05
+
+
+def test_a_bend_ahead_of_a_straight_leaves_the_robot_aligned_with_its_lane(monkeypatch):
+    """A Duckietown corner seen from its straight: straight for 0.35 m, then a right bend of
+    radius 0.2 m, the yellow line alone in view (the white inside of the bend out of view).
+    One arc through the robot fits it only turned far off the robot's heading; two arcs
+    leave the robot where it is (aligned, 1 cm right of the centre) and the bend ahead."""
+    arc, bend = (-0.01, 0.0, 0.0), (0.35, -5.0)
+    pieces = path_pieces(arc, bend, +1, 'yellow')
+    est, fit = measure(pieces, DT, P)
+    assert est.bend is not None and est.bend[1] == pytest.approx(-5.0, rel=0.25)
+    assert abs(math.degrees(est.heading)) < 4 and est.offset == pytest.approx(0.01, abs=0.01)
+    assert est.lateral_at(0.6) < -DT.lane_width / 2  # the lane goes right
+    monkeypatch.setattr(lanefit, 'BEND_GAIN', 0.0)  # no bend: the one arc
+    one, _ = measure(pieces, DT, P)
+    assert one.bend is None and abs(math.degrees(one.heading)) > 15
+
+
+def test_a_straight_lane_has_no_bend():
+    half = DT.lane_width / 2
+    est, _ = measure(line_pieces(half, 'yellow', dashed=True) + line_pieces(-half, 'white'),
+                     DT, P)
+    assert est.bend is None
+
+
 def test_robot_offset_is_the_distance_across_the_arc():
     assert robot_offset(0.2, math.radians(-60), 0.0) == pytest.approx(0.1)
     assert robot_offset(-0.2, math.radians(60), 0.0) == pytest.approx(-0.1)
@@ -143,6 +192,14 @@ def test_predict_moves_the_lane_with_the_robot():
     ahead = predict(bend, 0.2, 0.0)
     assert ahead.a == pytest.approx(0.5 * 0.2 ** 2) and ahead.b == pytest.approx(0.2)
     assert turned.confidence == pytest.approx(0.8)  # a prediction is less sure
+
+
+def test_predict_brings_the_bend_nearer_and_then_drives_into_it():
+    ahead = LaneEstimate(0.0, 0.0, 0.0, 1.0, bend=(0.3, -4.0))
+    nearer = predict(ahead, 0.1, 0.0)
+    assert nearer.bend == pytest.approx((0.2, -4.0)) and nearer.curvature == 0.0
+    inside = predict(nearer, 0.25, 0.0)
+    assert inside.bend is None and inside.curvature == pytest.approx(-4.0, rel=0.05)
 
 
 def test_blend_weighs_the_measurement_by_its_weight():
