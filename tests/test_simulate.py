@@ -597,13 +597,15 @@ def test_the_plots_title_has_a_band_of_its_own_above_the_track():
 
 def test_the_unseen_s_bends_of_the_benchmarks_load_and_turn_both_ways():
     """tools/tracks: the S-bends docs/benchmarks.md measures the bend model on."""
+    import yaml
+
     from lanelib.sim.tracks import load_track
     folder = os.path.join(os.path.dirname(__file__), '..', 'tools', 'tracks')
     names = sorted(n for n in os.listdir(folder) if n.endswith('.yaml'))
     assert names == ['s_unseen_a.yaml', 's_unseen_b.yaml', 's_unseen_c.yaml']
     for name in names:
         with open(os.path.join(folder, name)) as f:
-            angles = [s['arc']['angle_deg'] for s in __import__('yaml').safe_load(f)['segments']
+            angles = [s['arc']['angle_deg'] for s in yaml.safe_load(f)['segments']
                       if 'arc' in s]
         assert min(angles) < 0 < max(angles)
         load_track(os.path.join(folder, name))
