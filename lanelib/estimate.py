@@ -103,9 +103,16 @@ def predict(est, ds, dtheta):
 
 
 def blend(pred, meas, weight):
-    """The prediction moved `weight` (0..1) of the way to the measurement; where the lane
-    bends ahead, as measured."""
-    return LaneEstimate(pred.a + weight * (meas.a - pred.a), pred.b + weight * (meas.b - pred.b),
-                        pred.c + weight * (meas.c - pred.c),
-                        pred.confidence + weight * (meas.confidence - pred.confidence),
-                        meas.left, meas.right, meas.reach, width=meas.width, bend=meas.bend)
+    """The prediction moved `weight` (0..1) of the way to the measurement. The bend ahead is
+    the measurement's where it sees one; where it sees none, the bend predicted fades into
+    the arc measured at the same pace (out of the near view, a bend's entry is measured as
+    one arc bent less than either of its parts, which is no reason to forget the bend)."""
+    def towards(old, new):
+        return old + weight * (new - old)
+
+    bend = meas.bend
+    if bend is None and pred.bend is not None:
+        bend = (pred.bend[0], towards(pred.bend[1], meas.curvature))
+    return LaneEstimate(towards(pred.a, meas.a), towards(pred.b, meas.b), towards(pred.c, meas.c),
+                        towards(pred.confidence, meas.confidence),
+                        meas.left, meas.right, meas.reach, width=meas.width, bend=bend)

@@ -359,8 +359,9 @@ def _fit_bend(points, on, lane, lane_width, priors, limits):
     """(lane (e, psi, k, width), bend (s0, k2)) of the centre line as two arcs, the second
     taking over s0 along the first, fitted to the lane's points (on: each point's side), when
     the one arc misses them by more than BEND_FLOOR (RMS) and the two leave at most BEND_GAIN
-    of its weighted squared distances, change the curvature by at least BEND_MIN, keep the
-    lane's lines on its pieces and the robot no further out of it; else None. A bend's entry
+    of its weighted squared distances, change the curvature by at least BEND_MIN, bend less
+    tightly than the lane's half width, keep the lane's lines on its pieces and the robot no
+    further out of it; else None. A bend's entry
     seen from its straight, an S-bend's turn the other way: one arc through the robot fits
     such a lane only turned away from it at the robot. Levenberg-Marquardt in (e, psi, k, k2,
     s0, width) from s0 at BEND_STARTS, each from the one arc and from parabolas through the
@@ -424,6 +425,7 @@ def _fit_bend(points, on, lane, lane_width, priors, limits):
     r = residual(q)
     off = np.abs(r.reshape(-1, POINTS).mean(axis=1))[on[::POINTS] != 0]
     if (float(w @ r ** 2) > BEND_GAIN * one or abs(q[3] - q[2]) * lane_width < BEND_MIN or
+            abs(q[3]) * q[5] / 2 >= 1 or  # the inner line would turn back on itself
             np.any(off > TOLERANCES[-1] * lane_width) or
             abs(robot_offset(*q[:3])) > max(q[5] / 2, abs(robot_offset(*lane[:3])))):
         return None

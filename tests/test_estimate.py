@@ -165,6 +165,14 @@ def test_a_bend_ahead_of_a_straight_leaves_the_robot_aligned_with_its_lane(monke
     assert one.bend is None and abs(math.degrees(one.heading)) > 15
 
 
+def test_a_bend_tighter_than_the_lane_allows_is_no_bend():
+    # a line bending so tightly that the lane's centre would have a radius under half the
+    # lane's width (its inner line turning back on itself): fitted, it would be such a bend
+    k2 = -1.5 * 2 / DT.lane_width
+    est, _ = measure(path_pieces((0.0, 0.0, 0.0), (0.35, k2), +1, 'yellow'), DT, P)
+    assert est.bend is None or abs(est.bend[1]) * DT.lane_width / 2 < 1
+
+
 def test_a_straight_lane_has_no_bend():
     half = DT.lane_width / 2
     est, _ = measure(line_pieces(half, 'yellow', dashed=True) + line_pieces(-half, 'white'),
@@ -208,6 +216,18 @@ def test_blend_weighs_the_measurement_by_its_weight():
     half = blend(pred, meas, 0.5)
     assert (half.a, half.b, half.c, half.confidence) == pytest.approx((0.05, 0.1, 0.15, 0.75))
     assert blend(pred, meas, 1.0).b == pytest.approx(0.2)
+
+
+def test_blend_takes_a_bend_seen_and_fades_one_not_seen():
+    pred = LaneEstimate(0.0, 0.0, 0.0, 0.5, bend=(0.4, -4.0))
+    seen = LaneEstimate(0.0, 0.0, 0.0, 1.0, bend=(0.5, 2.0))
+    assert blend(pred, seen, 0.3).bend == (0.5, 2.0)  # as measured
+    # a bend's entry out of the near view is measured as one arc bent less than the bend:
+    # the bend stays where predicted, its curvature moved towards the arc's by the weight
+    one_arc = LaneEstimate(0.0, 0.0, -0.5, 1.0)  # curvature -1 / m
+    faded = blend(pred, one_arc, 0.25)
+    assert faded.bend == pytest.approx((0.4, -4.0 + 0.25 * 3.0))
+    assert blend(LaneEstimate(0.0, 0.0, 0.0, 0.5), one_arc, 0.25).bend is None
 
 
 # ---------------------------------------------------------------- the memory

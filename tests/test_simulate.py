@@ -14,6 +14,7 @@ import simulate
 from kobuki_lane import LaneParams, make_controller
 from kobuki_lane import main as node_main
 from lanelib.camera import LECTURE_CAMERA
+from lanelib import lanefit
 from lanelib.estimate import LaneEstimate, measure
 from lanelib.geometry import Mounting, camera_axes
 from lanelib.improved import ImprovedParams
@@ -352,23 +353,29 @@ def test_the_simulated_base_publishes_its_odometry_with_slip():
     assert sim.base.distance == pytest.approx(0.1, abs=1e-6)
 
 
-def test_lane_memory_holds_the_line_into_a_tight_bend():
-    # the camera sees the floor from 0.6 m ahead: without memory the bend's entry is steered
-    # on a fit extrapolated from there, with it on the centre line seen earlier
+def test_lane_memory_or_the_bend_holds_the_line_into_a_tight_bend(monkeypatch):
+    # the camera sees the floor from 0.6 m ahead: with neither memory nor a bend in the lane
+    # found, the bend's entry is steered on one arc extrapolated from there; memory steers on
+    # the centre line seen earlier, the bend on an arc that begins where the bend does
     spec = {'lane_width': 0.35, 'tape_width': 0.03,
             'segments': [{'straight': 1.5}, {'arc': {'radius': 0.9, 'angle_deg': 90}},
                          {'straight': 0.8}]}
     with_memory = simulate.run(from_dict(dict(spec), 'bend'), 'improved')
     assert with_memory['completed'] and with_memory['max_offset_m'] < 0.03
+
     def without(name, spec, params):
         improved = replace(improved_params(spec), memory=0.0, roi_far=2.0 / 0.35,
                            curve_slowdown=0.8 / 0.35)
         return make_controller(name, params, LECTURE_CAMERA, improved)
 
-    without_memory = simulate.run(from_dict(dict(spec), 'bend'), 'improved',
-                                  controller_factory=without)
-    # measured: 2.5 cm with memory, 4.2 cm without
-    assert without_memory['max_offset_m'] > 1.5 * with_memory['max_offset_m']
+    bend_only = simulate.run(from_dict(dict(spec), 'bend'), 'improved',
+                             controller_factory=without)
+    assert bend_only['completed'] and bend_only['max_offset_m'] < 0.03
+    monkeypatch.setattr(lanefit, 'BEND_GAIN', 0.0)  # no bend: the one arc
+    neither = simulate.run(from_dict(dict(spec), 'bend'), 'improved',
+                           controller_factory=without)
+    # measured: 2.25 cm with memory, 2.2 cm with the bend alone, 4.15 cm with neither
+    assert neither['max_offset_m'] > 1.5 * with_memory['max_offset_m']
 
 
 def test_a_run_is_deterministic_for_a_seed():
