@@ -13,8 +13,8 @@ from helpers import SAMPLES
 import simulate
 from kobuki_lane import LaneParams, make_controller
 from kobuki_lane import main as node_main
-from lanelib.camera import LECTURE_CAMERA
 from lanelib import lanefit
+from lanelib.camera import LECTURE_CAMERA
 from lanelib.estimate import LaneEstimate, measure
 from lanelib.geometry import Mounting, camera_axes
 from lanelib.improved import ImprovedParams
