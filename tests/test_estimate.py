@@ -149,6 +149,23 @@ def test_the_bent_centre_line_is_the_arc_until_the_bend_and_goes_on_from_it():
     assert abs(signed_distance(px[2:], py[2:], *arc)[0]) > 0.05
 
 
+def test_bent_lines_measured_side_by_side_are_each_measured_alone():
+    # the bend fit evaluates all its starts and their steps in one array (_bent_distances):
+    # each row is the distance from the first arc up to s0 and from the second one after
+    x, y = np.linspace(0.1, 1.0, 12), np.linspace(-0.2, 0.3, 12)
+    lines = np.array([[0.02, 0.1, 1.5, -4.0, 0.3], [-0.05, -0.3, 0.0, 2.0, 0.5],
+                      [0.0, 0.0, 5e-5, 0.0, 0.2], [0.1, 0.4, -2.0, -2.0, 0.7]])
+    together = lanefit._bent_distances(x, y, lines)
+    for (e, psi, k, k2, s0), row in zip(lines, together):
+        (x0,), (y0,), (h0,) = centre_path((e, psi, k), [s0])
+        after = lanefit._along(x, y, e, psi, k) > s0
+        alone = np.where(after, signed_distance(x - x0, y, y0, h0, k2),
+                         signed_distance(x, y, e, psi, k))
+        assert row == pytest.approx(alone, abs=1e-9)
+        assert bent_distance(x, y, (e, psi, k), (s0, k2)) == pytest.approx(row, abs=1e-12)
+    assert np.abs(together[1] - signed_distance(x, y, *lines[1, :3])).max() > 0.05  # bent
+
+
 def test_a_bend_ahead_of_a_straight_leaves_the_robot_aligned_with_its_lane(monkeypatch):
     """A Duckietown corner seen from its straight: straight for 0.35 m, then a right bend of
     radius 0.2 m, the yellow line alone in view (the white inside of the bend out of view).
