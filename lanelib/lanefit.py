@@ -437,8 +437,7 @@ def _fit_bend(points, on, lane, lane_width, priors, limits):
         better = c_trial < c
         q[better], c[better], r[better] = trial[better], c_trial[better], r_trial[better]
         damping = np.where(better, damping / 3, damping * 10)
-    best = (c[int(np.argmin(c))], q[int(np.argmin(c))])
-    _, q = best
+    q = q[int(np.argmin(c))]  # the best start's fit (the first of equals, as before)
     r = residual(q)
     off = np.abs(r.reshape(-1, POINTS).mean(axis=1))[on[::POINTS] != 0]
     if (float(w @ r ** 2) > BEND_GAIN * one or abs(q[3] - q[2]) * lane_width < BEND_MIN or
