@@ -386,14 +386,13 @@ def _fit_bend(points, on, lane, lane_width, priors, limits):
     seen = x[w > 0]
     if seen.size < 2 * POINTS:
         return None
+    full = x, y, on  # the fit needs only the lane's own points; the last check needs every one
+    x, y, on, w = x[w > 0], y[w > 0], on[w > 0], w[w > 0]
     pull, target = (np.insert(np.asarray(v, float), 3, (0.0, 0.0)) for v in priors)
     pull += 1e-9
     if limits[0] == limits[1]:
         pull[5] = 1e12  # no step in the width
     steps = (1e-6, 1e-6, 1e-4, 1e-4, 1e-5)
-
-    def residual(q):
-        return bent_distance(x, y, q[:3], (q[4], q[3])) - on * q[5] / 2
 
     def costs(qs):  # (S,) costs and (S, N) residuals of S parameter sets
         r = _bent_distances(x, y, qs[:, :5]) - on * qs[:, 5:6] / 2
@@ -412,18 +411,23 @@ def _fit_bend(points, on, lane, lane_width, priors, limits):
             k2 = _parabola(x[far], (y - on * width / 2)[far], w[far])[2] if (
                 np.count_nonzero(far) >= 3 * POINTS) else k
             starts.append([a, math.atan(slope), k1, k2, s0, width])
-    # every start at once: each its own Levenberg-Marquardt, in one array
-    q = np.array(starts, float)
-    c, r = costs(q)
-    damping = np.full(len(q), 1e-3)
     moves = np.zeros((6, 6))
     moves[1:, :5] = np.diag(steps)
+
+    def evaluated(qs):  # costs(qs), and the residuals' derivatives (S, N, 5) by differences
+        cost, res = costs((qs[:, None, :] + moves).reshape(-1, 6))  # each and its 5 steps
+        res = res.reshape(len(qs), 6, -1)
+        slopes = (res[:, 1:] - res[:, :1]) / np.array(steps)[:, None]
+        return cost[::6], res[:, 0], slopes.transpose(0, 2, 1)
+
+    # every start at once: each its own Levenberg-Marquardt, in one array; a trial is
+    # evaluated with its steps, so that where it is kept its derivatives are at hand
+    q = np.array(starts, float)
     jac = np.empty((len(q), len(x), 6))
     jac[:, :, 5] = -on / 2
+    c, r, jac[:, :, :5] = evaluated(q)
+    damping = np.full(len(q), 1e-3)
     for _ in range(3 * ITERATIONS):
-        moved = (q[:, None, :] + moves).reshape(-1, 6)  # each start and its 5 steps
-        both = costs(moved)[1].reshape(len(q), 6, len(x))
-        jac[:, :, :5] = ((both[:, 1:] - both[:, :1]) / np.array(steps)[:, None]).transpose(0, 2, 1)
         wj = jac.transpose(0, 2, 1) * w
         normal = wj @ jac + np.diag(pull)
         scaled = normal + damping[:, None, None] * (normal * np.eye(6))
@@ -433,14 +437,17 @@ def _fit_bend(points, on, lane, lane_width, priors, limits):
         trial[:, 2:4] = np.clip(trial[:, 2:4], -30.0, 30.0)
         trial[:, 4] = np.clip(trial[:, 4], seen.min(), seen.max())
         trial[:, 5] = np.clip(trial[:, 5], *limits)
-        c_trial, r_trial = costs(trial)
+        c_trial, r_trial, j_trial = evaluated(trial)
         better = c_trial < c
         q[better], c[better], r[better] = trial[better], c_trial[better], r_trial[better]
+        jac[better, :, :5] = j_trial[better]
         damping = np.where(better, damping / 3, damping * 10)
-    q = q[int(np.argmin(c))]  # the best start's fit (the first of equals, as before)
-    r = residual(q)
+    best = int(np.argmin(c))  # the best start's fit (the first of equals, as before)
+    q, c_best = q[best], float(r[best] ** 2 @ w)
+    x, y, on = full
+    r = bent_distance(x, y, q[:3], (q[4], q[3])) - on * q[5] / 2
     off = np.abs(r.reshape(-1, POINTS).mean(axis=1))[on[::POINTS] != 0]
-    if (float(w @ r ** 2) > BEND_GAIN * one or abs(q[3] - q[2]) * lane_width < BEND_MIN or
+    if (c_best > BEND_GAIN * one or abs(q[3] - q[2]) * lane_width < BEND_MIN or
             abs(q[3]) * q[5] / 2 >= 1 or  # the inner line would turn back on itself
             np.any(off > TOLERANCES[-1] * lane_width) or
             abs(robot_offset(*q[:3])) > max(q[5] / 2, abs(robot_offset(*lane[:3])))):
