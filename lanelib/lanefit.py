@@ -269,12 +269,12 @@ def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tole
               anchor=None):
     """The best-supported lane (LaneFit) among the pieces, or None. prior: (e, psi, k) of the
     lane expected from earlier frames; when it, refitted, explains `explained` of the line in
-    view with the robot inside it, the search ends there. anchor: (e, psi) the lane is
-    expected to have at the robot (default: the prior's); every fit is pulled a little towards
-    it. The width between the lines is
-    fitted within width_tolerance of lane_width (a camera's pitch a little off, a track taped a
-    little wider, make the lines look that much further apart: forced to the profile's width
-    the lane would tilt to fit them); with one line in view it stays lane_width."""
+    view with the robot inside it, it is the lane, whatever else the search finds. anchor:
+    (e, psi) the lane is expected to have at the robot (default: the prior's); every fit is
+    pulled a little towards it. The width between the lines is fitted within width_tolerance
+    of lane_width (a camera's pitch a little off, a track taped a little wider, make the lines
+    look that much further apart: forced to the profile's width the lane would tilt to fit
+    them); with one line in view it stays lane_width."""
     if not pieces:
         return None
     half = lane_width / 2
@@ -296,29 +296,30 @@ def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tole
     priors = (weights, target)
     limits = (lane_width * (1 - width_tolerance), lane_width * (1 + width_tolerance))
     search = (pieces, points, allowed, lane_width, priors, limits, _regions(pieces), anchor)
-    if prior is not None:
-        found = _fit_seeds(np.array([[*prior, lane_width]], float), *search)
-        if found is not None:
-            # only with both its lines in view: one line alone fits a lane on either side of
-            # it, and which one is the search's to say (the score, with the anchor)
-            _, lane, sides, support = found
-            if (1 in sides and -1 in sides and abs(robot_offset(*lane[:3])) <= lane[3] / 2 and
-                    support >= explained * total):
-                return _lane(pieces, found, points, priors, limits, lane_width)
     seeds = [] if prior is None else [(*prior, lane_width)]
     for piece, (may_left, may_right) in zip(pieces, allowed):
         x0, y0 = piece.summary[0][1], piece.summary[1][1]
         for side in [s for s, may in ((1, may_left), (-1, may_right)) if may]:
             e = y0 - side * half / math.cos(piece.phi) - math.tan(piece.phi) * x0
             seeds += [(e, piece.phi, k / lane_width, lane_width) for k in SEED_CURVATURES]
-    found = _fit_seeds(np.array(seeds, float), *search)
+    found, first = _fit_seeds(np.array(seeds, float), *search)
+    if prior is not None and first is not None:
+        # only with both its lines in view: one line alone fits a lane on either side of
+        # it, and which one is the search's to say (the score, with the anchor)
+        _, lane, sides, support = first
+        if (1 in sides and -1 in sides and abs(robot_offset(*lane[:3])) <= lane[3] / 2 and
+                support >= explained * total):
+            found = first
     return None if found is None else _lane(pieces, found, points, priors, limits, lane_width)
 
 
 def _fit_seeds(seeds, pieces, points, allowed, lane_width, priors, limits, regions=None,
                anchor=None):
     """(score, lane, sides, support) of the best lane grown from the seeds (S, 4: e, psi, k,
-    width), or None."""
+    width), and of the lane grown from the first seed; each None where there is none. Each
+    seed grows on its own (a seed whose lane another's joins is dropped, the first kept), so
+    the first grows as it would alone: find_lane's prior, refitted, without a fit of its own
+    (two fits cost as much as one search: the time is the calls, not the seeds)."""
     x, y, w = points
     lanes = seeds
     for tol in TOLERANCES:
@@ -350,9 +351,9 @@ def _fit_seeds(seeds, pieces, points, allowed, lane_width, priors, limits, regio
         score = score * np.exp(-0.5 * ((lanes[:, 0] - anchor[0]) / half) ** 2)
     score[~sides.any(axis=1)] = -1.0
     best = int(np.argmax(score))
-    if score[best] <= 0:
-        return None
-    return score[best], lanes[best], sides[best], float(left[best] + right[best])
+    found = [(score[i], lanes[i], sides[i], float(left[i] + right[i])) if score[i] > 0 else None
+             for i in (best, 0)]
+    return found[0], found[1]
 
 
 def _lane(pieces, found, points, priors, limits, lane_width):
