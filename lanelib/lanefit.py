@@ -128,7 +128,8 @@ def _distance(x, y, e, psi, k, jacobian=False):
     u, v, s, c = _arc_frame(x, y, e, psi)
     ku, kv1 = k * u, 1 - k * v
     root = np.sqrt(ku * ku + kv1 * kv1)  # k r
-    q, den = 2 * v - k * (u * u + v * v), 1 + root
+    squared = u * u + v * v
+    q, den = 2 * v - k * squared, 1 + root
     d = q / den
     if not jacobian:
         return d, None
@@ -136,7 +137,7 @@ def _distance(x, y, e, psi, k, jacobian=False):
     root = np.maximum(root, 1e-12)
     q_u, q_v = -2 * ku, 2 * kv1
     r_u, r_v = k * ku / root, -k * kv1 / root
-    q_k, r_k = -(u * u + v * v), (ku * u - kv1 * v) / root
+    q_k, r_k = -squared, (ku * u - kv1 * v) / root
     q_e, r_e = -(q_u * s + q_v * c), -(r_u * s + r_v * c)
     q_psi, r_psi = q_u * v - q_v * u, r_u * v - r_v * u
     return d, np.stack([(q_e - d * r_e) / den, (q_psi - d * r_psi) / den,
@@ -160,12 +161,13 @@ def fit_lanes(x, y, sides, w, lanes, priors, limits, iterations=ITERATIONS):
     pull = pull + 1e-9
     if limits[0] == limits[1]:
         pull[3] = 1e12  # no step in the width
+    jac = np.empty(sides.shape + (4,))
+    jac[..., 3] = -sides / 2  # the width's column: the same every step
+    pulled = np.diag(pull)
     for _ in range(iterations):
-        d, jac = _distances(x, y, lanes, jacobian=True)
-        jac = np.concatenate([jac, np.broadcast_to(-sides[..., None] / 2, jac.shape[:2] + (1,))],
-                             axis=2)
+        d, jac[..., :3] = _distances(x, y, lanes, jacobian=True)
         wj = np.swapaxes(jac * w[..., None], 1, 2)  # (S, 4, N)
-        a = wj @ jac + np.diag(pull)
+        a = wj @ jac + pulled
         b = (wj @ (d - sides * lanes[:, 3:4] / 2)[..., None])[..., 0] + pull * (lanes - target)
         lanes -= np.linalg.solve(a, b[..., None])[..., 0]
         lanes[:, 1] = np.clip(lanes[:, 1], -1.4, 1.4)
