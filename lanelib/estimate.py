@@ -68,13 +68,14 @@ class LaneEstimate:
         return self.point_at(distance)[1]
 
 
-def measure(pieces, profile, p, prior=None, anchor=None):
+def measure(pieces, profile, p, prior=None, anchor=None, prior_first=False):
     """One frame's LaneEstimate from pieces of line with their colours, or None (module doc);
     and the lanefit.LaneFit it rests on (or None). p: ImprovedParams in metres; prior: the
     arc (e, psi, k) of the lane expected; anchor: (offset, heading) of the lane expected at
-    the robot, if known better than the prior's (lanefit.find_lane)."""
+    the robot, if known better than the prior's; prior_first: try the prior alone first (it
+    was the lane the frame before: lanefit.find_lane)."""
     fit = find_lane(pieces, profile, p.lane_width, prior, width_tolerance=p.width_tolerance,
-                    anchor=anchor)
+                    anchor=anchor, prior_first=prior_first)
     if fit is None or fit.left + fit.right < MIN_SEEN * p.lane_width or abs(fit.across) > fit.width:
         return None, fit
     b = math.tan(fit.psi)

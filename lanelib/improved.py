@@ -211,6 +211,7 @@ class ImprovedController:
         self.odom_pose = None  # the odometry's pose at the last frame, while it comes
         self.search = None  # while searching: [direction, angle turned [rad], time [s]]
         self.sides = None  # each piece's side in the last frame's lane (pictures)
+        self.held = False  # the last frame's lane was the one predicted (find_lane's prior)
         self.memory = LaneMemory(self.p.memory) if self.p.memory > 0 else None
 
     @property
@@ -284,9 +285,10 @@ class ImprovedController:
                     # is the estimate's, moved with the robot: an arc fitted to the memory of
                     # a bend's entry (straight, then bending) is turned the wrong way there
                     guide, anchor = found[0], prior.arc[:2]
-        meas, fit = measure(detection.pieces, self.profile, p, guide, anchor)
+        meas, fit = measure(detection.pieces, self.profile, p, guide, anchor, self.held)
         self.mark('lane')
         self.sides = None if fit is None else fit.sides
+        self.held = fit is not None and fit.predicted
         blind = self.lost_for > p.lost_timeout  # the estimate from before is stale
         # a lane found after one was lost must be the one lost (the robot cannot have left it
         # without a departure); before any lane was seen there is none to lose

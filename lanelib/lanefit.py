@@ -180,11 +180,12 @@ class LaneFit:
     """The lane found: arc (e, psi, k) and its width between the line centres as the lines
     show it; per piece its side (+1 left, -1 right, 0 not the lane's); the lengths of line on
     each side [m]; the centre-line points the pieces give (x, y, weight); and where the lane's
-    curvature changes, if it does: bend (s0 [m] along it, k2 [1/m] after), else None."""
+    curvature changes, if it does: bend (s0 [m] along it, k2 [1/m] after), else None;
+    predicted: whether it is the lane predicted, refitted (find_lane's prior)."""
 
-    def __init__(self, arc, sides, left, right, centre, width=None, bend=None):
+    def __init__(self, arc, sides, left, right, centre, width=None, bend=None, predicted=False):
         self.e, self.psi, self.k = arc[:3]
-        self.width, self.bend = width, bend
+        self.width, self.bend, self.predicted = width, bend, predicted
         self.sides, self.left, self.right, self.centre = sides, left, right, centre
 
     @property
@@ -268,10 +269,13 @@ def _regions(pieces):
 
 
 def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tolerance=0.3,
-              anchor=None):
+              anchor=None, prior_first=False):
     """The best-supported lane (LaneFit) among the pieces, or None. prior: (e, psi, k) of the
     lane expected from earlier frames; when it, refitted, explains `explained` of the line in
-    view with the robot inside it, it is the lane, whatever else the search finds. anchor:
+    view with the robot inside it, it is the lane (LaneFit.predicted), whatever else the search
+    finds. It is refitted as the search's first seed, where it grows as it would alone; with
+    prior_first (it was the lane the frame before), alone first, and the search only if it
+    fails: the same lane either way, in about half the time when it holds. anchor:
     (e, psi) the lane is expected to have at the robot (default: the prior's); every fit is
     pulled a little towards it. The width between the lines is fitted within width_tolerance
     of lane_width (a camera's pitch a little off, a track taped a little wider, make the lines
@@ -298,6 +302,20 @@ def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tole
     priors = (weights, target)
     limits = (lane_width * (1 - width_tolerance), lane_width * (1 + width_tolerance))
     search = (pieces, points, allowed, lane_width, priors, limits, _regions(pieces), anchor)
+
+    def holds(found):  # the prior, refitted, is the lane: both its lines in view (one line
+        # alone fits a lane on either side of it, and which one is the search's to say: the
+        # score, with the anchor), the robot inside it, most of the line in view explained
+        if found is None:
+            return False
+        _, lane, sides, support = found
+        return bool(1 in sides and -1 in sides and abs(robot_offset(*lane[:3])) <= lane[3] / 2
+                    and support >= explained * total)
+
+    if prior is not None and prior_first:
+        found = _fit_seeds(np.array([[*prior, lane_width]], float), *search)[1]
+        if holds(found):
+            return _lane(pieces, found, points, priors, limits, lane_width, predicted=True)
     seeds = [] if prior is None else [(*prior, lane_width)]
     for piece, (may_left, may_right) in zip(pieces, allowed):
         x0, y0 = piece.summary[0][1], piece.summary[1][1]
@@ -305,13 +323,8 @@ def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tole
             e = y0 - side * half / math.cos(piece.phi) - math.tan(piece.phi) * x0
             seeds += [(e, piece.phi, k / lane_width, lane_width) for k in SEED_CURVATURES]
     found, first = _fit_seeds(np.array(seeds, float), *search)
-    if prior is not None and first is not None:
-        # only with both its lines in view: one line alone fits a lane on either side of
-        # it, and which one is the search's to say (the score, with the anchor)
-        _, lane, sides, support = first
-        if (1 in sides and -1 in sides and abs(robot_offset(*lane[:3])) <= lane[3] / 2 and
-                support >= explained * total):
-            found = first
+    if prior is not None and holds(first):
+        return _lane(pieces, first, points, priors, limits, lane_width, predicted=True)
     return None if found is None else _lane(pieces, found, points, priors, limits, lane_width)
 
 
@@ -358,7 +371,7 @@ def _fit_seeds(seeds, pieces, points, allowed, lane_width, priors, limits, regio
     return found[0], found[1]
 
 
-def _lane(pieces, found, points, priors, limits, lane_width):
+def _lane(pieces, found, points, priors, limits, lane_width, predicted=False):
     """The LaneFit of the lane found (_fit_seeds), with a bend where one fits its points
     better (_fit_bend)."""
     _, lane, sides, _ = found
@@ -368,7 +381,7 @@ def _lane(pieces, found, points, priors, limits, lane_width):
     lengths = [sum(p.length for p, s in zip(pieces, sides) if s == side) for side in (1, -1)]
     return LaneFit(lane, sides, lengths[0], lengths[1],
                    _centre_points(pieces, sides, lane[:3], lane[3] / 2, bend), float(lane[3]),
-                   bend)
+                   bend, predicted)
 
 
 def _fit_bend(points, on, lane, lane_width, priors, limits):

@@ -350,6 +350,24 @@ def test_one_line_is_not_given_a_side_by_the_refitted_prior_alone():
     assert fit.e == pytest.approx(half, abs=0.04) and set(fit.sides) == {-1}
 
 
+def test_the_lane_predicted_is_refitted_alike_alone_or_inside_the_search():
+    # find_lane refits the lane predicted as the search's first seed, or with prior_first
+    # alone before the search (each seed grows on its own): the lane found is the same
+    half = DT.lane_width / 2
+    both = line_pieces(half, 'yellow', dashed=True) + line_pieces(-half, 'white')
+    one = line_pieces(-half, 'white')
+    cases = ((both, (0.01, 0.03, 0.2), True), (one, (0.0, 0.0, 0.0), False),
+             (both, (half, 0.0, 0.0), True))
+    for pieces, prior, held in cases:
+        inside = find_lane(pieces, DT, DT.lane_width, prior=prior)
+        alone = find_lane(pieces, DT, DT.lane_width, prior=prior, prior_first=True)
+        assert inside.predicted == alone.predicted == held
+        assert (alone.e, alone.psi, alone.k, alone.width) == pytest.approx(
+            (inside.e, inside.psi, inside.k, inside.width), abs=1e-9)
+        assert list(alone.sides) == list(inside.sides)
+    assert not find_lane(both, DT, DT.lane_width).predicted  # no lane predicted
+
+
 def bending_line_pieces(y0, start, radius, along, step=0.08):
     """Pieces of a line at lateral y0, straight to x = start, then bending left round a centre
     line of `radius` [m]; `along`: the stretch of the line in view (metres along it)."""
