@@ -102,18 +102,16 @@ def _bent_distances(x, y, q):
     bent = np.where(straight, 1.0, k)
     x0 = np.where(straight, s0 * np.cos(psi), (np.sin(h0) - np.sin(psi)) / bent)
     y0 = np.where(straight, e + s0 * np.sin(psi), e + (np.cos(psi) - np.cos(h0)) / bent)
-    # how far along the first arc the points' nearest points lie (_along)
-    u, v, _, _ = _arc_frame(x, y, e, psi)
-    flat = np.abs(k) < 1e-9
-    along = np.where(flat, u, np.arctan2(k * u, 1 - k * v) / np.where(flat, 1.0, k))
-    return np.where(along > s0, _distance(x - x0, y, y0, h0, k2)[0],
+    return np.where(_along(x, y, e, psi, k) > s0, _distance(x - x0, y, y0, h0, k2)[0],
                     _distance(x, y, e, psi, k)[0])
 
 
 def _along(x, y, e, psi, k):
-    """How far along the arc (e, psi, k) [m] the points' nearest points on its circle lie."""
+    """How far along the arc (e, psi, k) [m] the points' nearest points on its circle lie;
+    arrays of arcs (e, psi, k of shape (S, 1)) give an (S, N) array."""
     u, v, _, _ = _arc_frame(x, y, e, psi)
-    return u if abs(k) < 1e-9 else np.arctan2(k * u, 1 - k * v) / k
+    flat = np.abs(k) < 1e-9
+    return np.where(flat, u, np.arctan2(k * u, 1 - k * v) / np.where(flat, 1.0, k))
 
 
 def _arc_frame(x, y, e, psi):

@@ -23,7 +23,11 @@ every built-in track, with offsets, noise, a lighting gradient and gaps), prints
   memory      in a fresh process running the node's dry-run loop over the samples, looped:
               RSS after 1,000 and after --soak frames, and the peak
   improved    the improved controller (perception, lane fit, steering) per stage, each frame
-              read afresh, interleaved with the literal code on the same frames
+              read afresh, interleaved with the literal code on the same frames; and driving:
+              every frame of simulate.py's closed-loop runs of the lane tracks (the lecture's
+              world) in turn, as a running node reads them, with the lane from the frames
+              before (the prior's refit, the memory, the bend), which costs more than a fresh
+              frame (--quick: the lecture track only)
   worst case  cluttered frames (dense texture, many edges; plain floor with up to 1,600
               lines): the lecture's Hough stage, the improved controller's whole frame
 
@@ -410,6 +414,25 @@ def time_improved(frames, repeats, lane='lecture'):
     return result
 
 
+def time_improved_driving(tracks, seed=0):
+    """The improved controller per stage as a running node uses it: every frame of
+    simulate.py's closed-loop run of each track (the lecture's world, clean), in turn, with
+    the lane from the frames before."""
+    import simulate
+
+    clock = StageClock(IMPROVED_STAGES, 'steer')
+
+    def timed(name, spec, params, **kwargs):
+        controller = simulate.controller_for(name, spec, params, **kwargs)
+        controller.mark = clock.mark
+        return controller
+    for track in tracks:
+        simulate.run(load_track(track), 'improved', seed=seed, controller_factory=timed)
+    result = {stage: stats(t) for stage, t in clock.times.items()}
+    result.update(tracks=list(tracks), frames=len(clock.times['total']))
+    return result
+
+
 def worst_case(repeats=20):
     """Cluttered frames: the lecture's Hough stage and whole pipeline (never bounded), and the
     improved controller's whole frame, on dense texture with 300 lines, and on plain floor
@@ -534,6 +557,13 @@ def main(argv=None):
           f"{imp['literal']['total']['median_ms']:.3f} ms: perception/literal "
           f"{imp['perception_over_literal']}, whole improved frame/literal "
           f"{imp['improved_over_literal']}")
+    tracks = ['lecture'] if args.quick else list(LANE_TRACKS)
+    report['improved_driving'] = drive = time_improved_driving(tracks)
+    print(f"\nimproved controller driving (simulate.py, {', '.join(tracks)}: {drive['frames']} "
+          'frames in turn, with the lane from the frames before):')
+    print('| stage | median / p95 ms |\n|---|---|')
+    for stage in IMPROVED_STAGES + ('total',):
+        print(f"| {stage} | {drive[stage]['median_ms']:.3f} / {drive[stage]['p95_ms']:.3f} |")
     report['worst_case'] = worst = worst_case()
     w = worst['lecture']
     print(f"\ncluttered frame, lecture: Hough median {w['hough']['median_ms']} ms (p95 "
