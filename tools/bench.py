@@ -32,7 +32,7 @@ every built-in track, with offsets, noise, a lighting gradient and gaps), prints
               lines): the lecture's Hough stage, the improved controller's whole frame
 
 usage (from the repository root):
-    python -m tools.bench                      everything (about 2 minutes on 2 cores)
+    python -m tools.bench                      everything (about 3 minutes on 2 cores)
     python -m tools.bench --quick              fewer frames, no throughput or memory runs
     python -m tools.bench --json out/bench.json
     python -m tools.bench --quick --lane duckietown   the improved perception with two colours
