@@ -406,7 +406,7 @@ def _fit_bend(points, on, lane, lane_width, priors, limits):
     pull += 1e-9
     if limits[0] == limits[1]:
         pull[5] = 1e12  # no step in the width
-    steps = (1e-6, 1e-6, 1e-4, 1e-4, 1e-5)
+    steps = np.array((1e-6, 1e-6, 1e-4, 1e-4, 1e-5))
 
     def costs(qs):  # (S,) costs and (S, N) residuals of S parameter sets
         r = _bent_distances(x, y, qs[:, :5]) - on * qs[:, 5:6] / 2
@@ -431,7 +431,7 @@ def _fit_bend(points, on, lane, lane_width, priors, limits):
     def evaluated(qs):  # costs(qs), and the residuals' derivatives (S, N, 5) by differences
         cost, res = costs((qs[:, None, :] + moves).reshape(-1, 6))  # each and its 5 steps
         res = res.reshape(len(qs), 6, -1)
-        slopes = (res[:, 1:] - res[:, :1]) / np.array(steps)[:, None]
+        slopes = (res[:, 1:] - res[:, :1]) / steps[:, None]
         return cost[::6], res[:, 0], slopes.transpose(0, 2, 1)
 
     # every start at once: each its own Levenberg-Marquardt, in one array; a trial is
@@ -441,9 +441,10 @@ def _fit_bend(points, on, lane, lane_width, priors, limits):
     jac[:, :, 5] = -on / 2
     c, r, jac[:, :, :5] = evaluated(q)
     damping = np.full(len(q), 1e-3)
+    pulled = np.diag(pull)
     for _ in range(3 * ITERATIONS):
         wj = jac.transpose(0, 2, 1) * w
-        normal = wj @ jac + np.diag(pull)
+        normal = wj @ jac + pulled
         scaled = normal + damping[:, None, None] * (normal * np.eye(6))
         gradient = (wj @ r[..., None])[..., 0] + pull * (q - target)
         trial = q - np.linalg.solve(scaled, gradient[..., None])[..., 0]
