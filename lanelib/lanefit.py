@@ -364,9 +364,8 @@ def _fit_seeds(seeds, pieces, points, allowed, lane_width, priors, limits, regio
         score = score * np.exp(-0.5 * ((lanes[:, 0] - anchor[0]) / half) ** 2)
     score[~sides.any(axis=1)] = -1.0
     best = int(np.argmax(score))
-    found = [(score[i], lanes[i], sides[i], float(left[i] + right[i])) if score[i] > 0 else None
-             for i in (best, 0)]
-    return found[0], found[1]
+    return tuple((score[i], lanes[i], sides[i], float(left[i] + right[i])) if score[i] > 0
+                 else None for i in (best, 0))
 
 
 def _firsts(rows):
@@ -408,11 +407,11 @@ def _fit_bend(points, on, lane, lane_width, priors, limits):
     and its steps per iteration): a start at a time took about 10 ms a frame."""
     x, y, w = points
     w = (on != 0) * w
-    seen = x[w > 0]
-    if seen.size < 2 * POINTS:
+    own = w > 0  # the lane's own points: the fit needs only these, the last check every one
+    if np.count_nonzero(own) < 2 * POINTS:
         return None
-    full = x, y, on  # the fit needs only the lane's own points; the last check needs every one
-    x, y, on, w = x[w > 0], y[w > 0], on[w > 0], w[w > 0]
+    full = x, y, on
+    x, y, on, w = x[own], y[own], on[own], w[own]
     pull, target = (np.insert(np.asarray(v, float), 3, (0.0, 0.0)) for v in priors)
     pull += 1e-9
     if limits[0] == limits[1]:
@@ -428,9 +427,9 @@ def _fit_bend(points, on, lane, lane_width, priors, limits):
         return None  # the one arc fits: nothing to gain
     e, psi, k, width = lane
     starts = []
-    for s0 in seen.min() + np.array(BEND_STARTS) * np.ptp(seen):
+    for s0 in x.min() + np.array(BEND_STARTS) * np.ptp(x):
         starts.append([e, psi, k, k, s0, width])
-        near, far = (x < s0) & (w > 0), (x >= s0) & (w > 0)
+        near, far = x < s0, x >= s0
         if np.count_nonzero(near) >= 2 * POINTS:  # before s0 a line or a parabola, after
             a, slope, k1 = _parabola(x[near], (y - on * width / 2)[near], w[near])
             k2 = _parabola(x[far], (y - on * width / 2)[far], w[far])[2] if (
@@ -461,7 +460,7 @@ def _fit_bend(points, on, lane, lane_width, priors, limits):
         trial = q - np.linalg.solve(scaled, gradient[..., None])[..., 0]
         trial[:, 1] = np.clip(trial[:, 1], -1.4, 1.4)
         trial[:, 2:4] = np.clip(trial[:, 2:4], -30.0, 30.0)
-        trial[:, 4] = np.clip(trial[:, 4], seen.min(), seen.max())
+        trial[:, 4] = np.clip(trial[:, 4], x.min(), x.max())
         trial[:, 5] = np.clip(trial[:, 5], *limits)
         c_trial, r_trial, j_trial = evaluated(trial)
         better = c_trial < c
