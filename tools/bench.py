@@ -464,6 +464,13 @@ def worst_case(repeats=20):
 
 # ---------------------------------------------------------------- report
 
+def stage_table(result):
+    """The improved controller's stages and whole frame, median / p95 ms, as a table."""
+    return '\n'.join(['| stage | median / p95 ms |', '|---|---|'] + [
+        f"| {stage} | {result[stage]['median_ms']:.3f} / {result[stage]['p95_ms']:.3f} |"
+        for stage in IMPROVED_STAGES + ('total',)])
+
+
 def table(results):
     rows = ['| stage | literal median / p95 ms | project median / p95 ms | '
             'floor median / p95 ms |', '|---|---|---|---|']
@@ -547,11 +554,7 @@ def main(argv=None):
     imp['lane'] = args.lane
     print(f'\nimproved controller (lane profile {args.lane}, each frame read afresh) against the '
           f'literal code, interleaved, {len(frames)} frames x {args.repeats}:')
-    print('| stage | median / p95 ms |\n|---|---|')
-    for stage, t in imp['improved'].items():
-        if stage == 'perception':
-            continue
-        print(f"| {stage} | {t['median_ms']:.3f} / {t['p95_ms']:.3f} |")
+    print(stage_table(imp['improved']))
     print(f"perception (undistort, colour, pieces) median "
           f"{imp['improved']['perception']['median_ms']:.3f} ms, the literal code's whole frame "
           f"{imp['literal']['total']['median_ms']:.3f} ms: perception/literal "
@@ -561,9 +564,7 @@ def main(argv=None):
     report['improved_driving'] = drive = time_improved_driving(tracks)
     print(f"\nimproved controller driving (simulate.py, {', '.join(tracks)}: {drive['frames']} "
           'frames in turn, with the lane from the frames before):')
-    print('| stage | median / p95 ms |\n|---|---|')
-    for stage in IMPROVED_STAGES + ('total',):
-        print(f"| {stage} | {drive[stage]['median_ms']:.3f} / {drive[stage]['p95_ms']:.3f} |")
+    print(stage_table(drive))
     report['worst_case'] = worst = worst_case()
     w = worst['lecture']
     print(f"\ncluttered frame, lecture: Hough median {w['hough']['median_ms']} ms (p95 "
