@@ -410,9 +410,12 @@ class ImprovedController:
         e = self.estimate
         if e is None:
             return dict(offset_m=None, heading_rad=None, curvature=None, confidence=0.0,
-                        lane_width_m=None, lane_lost_s=None, cluttered=self.cluttered)
+                        bend_m=None, bend_curvature=None, lane_width_m=None, lane_lost_s=None,
+                        cluttered=self.cluttered)
         width = None if e.width is None or self.lost_for > 0 else round(e.width, 4)
+        bend = (None, None) if e.bend is None else (round(e.bend[0], 4), round(e.bend[1], 4))
         return dict(offset_m=round(e.offset, 4), heading_rad=round(e.heading, 4),
                     curvature=round(e.curvature, 4), confidence=round(e.confidence, 3),
+                    bend_m=bend[0], bend_curvature=bend[1],
                     lane_width_m=width, lane_lost_s=round(min(self.lost_for, 1e6), 3),
                     cluttered=self.cluttered)

@@ -510,7 +510,8 @@ def test_the_node_runs_the_improved_controller(tmp_path):
     # the decision word says where the lane's centre lies at the look-ahead distance, as
     # the controller's estimate has it; check it against the recorded estimate
     for r in records:
-        est = LaneEstimate(-r['offset_m'], -math.tan(r['heading_rad']), 0.0, 1.0)
+        bend = None if r['bend_m'] is None else (r['bend_m'], r['bend_curvature'])
+        est = LaneEstimate(-r['offset_m'], -math.tan(r['heading_rad']), 0.0, 1.0, bend=bend)
         est.c = r['curvature'] * (1 + est.b ** 2) ** 1.5 / 2
         y = est.lateral_at(p.lookahead)
         turn = p.turn_offset * 0.35
