@@ -8,7 +8,11 @@
     blend     the prediction and the measurement weighed by the measurement's confidence
 
 The estimate is the centre line as y = a + b x + c x^2 about the robot (x ahead, y left): its
-offset (-a), heading (-atan b) and curvature (2c at the robot), and how sure of it (0..1).
+offset (-a), heading (-atan b) and curvature (2c / (1 + b^2)^1.5 at the robot), and how sure of
+it (0..1). It is predicted and blended as the arc it is measured as (offset, heading,
+curvature), not as the parabola's coefficients: for a lane turned across the view, as at a
+tight corner, c is many times the curvature, and moved as a coefficient it bent the lane
+expected several times more than anything measured (Duckietown's simulator: 4 to 40 / m).
 """
 
 import math
@@ -16,13 +20,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from lanelib.lanefit import LaneFit, find_lane, robot_offset
+from lanelib.lanefit import LaneFit, centre_path, find_lane, robot_offset
 
 MIN_SEEN = 0.25  # [lane widths] of the lane's lines: less is no lane (a scrap, a glint)
 FULL_VIEW = 2.9  # [lane widths] of line seen counts as a full view (confidence 1)
 ONE_LINE = 0.7  # how sure one line alone makes the estimate, against both
 FORGET = 0.8  # how much of its confidence a prediction keeps, per frame
 TURNED = math.radians(80)  # a lane predicted to run more than this across the view is lost
+CROSSING_STEPS = 4  # Newton steps to where the lane crosses the robot's sideways axis
 
 
 @dataclass
@@ -68,6 +73,11 @@ class LaneEstimate:
         return self.point_at(distance)[1]
 
 
+def half_curvature(k, b):
+    """c of the parabola y = a + b x + c x^2 that bends k [1/m] where its slope is b."""
+    return k * (1 + b * b) ** 1.5 / 2
+
+
 def measure(pieces, profile, p, prior=None, anchor=None, prior_first=False):
     """One frame's LaneEstimate from pieces of line with their colours, or None (module doc);
     and the lanefit.LaneFit it rests on (or None). p: ImprovedParams in metres; prior: the
@@ -82,29 +92,44 @@ def measure(pieces, profile, p, prior=None, anchor=None, prior_first=False):
     confidence = (min(1.0, (fit.left + fit.right) / (FULL_VIEW * p.lane_width)) *
                   (1.0 if fit.left and fit.right else ONE_LINE))
     cx, _, cw = fit.centre
-    return LaneEstimate(fit.e, b, fit.k * (1 + b * b) ** 1.5 / 2, confidence,
+    return LaneEstimate(fit.e, b, half_curvature(fit.k, b), confidence,
                         int(np.sum(fit.sides == 1)), int(np.sum(fit.sides == -1)),
                         float(np.average(cx, weights=cw)), fit.centre, fit.width, fit.bend), fit
 
 
 def predict(est, ds, dtheta):
-    """The centre line as seen after the robot drove `ds` [m] and turned `dtheta` [rad], or
-    None when it would run across the robot's view (more than TURNED from its heading: a
-    polynomial in x cannot say where such a lane goes, and predicted on it goes to infinity)."""
-    a = est.a + est.b * ds + est.c * ds ** 2
-    b = est.b + 2 * est.c * ds - dtheta * (1 + est.b ** 2)
-    if not (math.isfinite(a) and math.isfinite(b) and abs(b) < math.tan(TURNED)):
+    """The centre line as seen after the robot drove `ds` [m] ahead and turned `dtheta` [rad],
+    or None when it would run across the robot's view (more than TURNED from its heading).
+    The lane is an arc (lanefit), and an arc stays one as the robot moves: its offset and
+    heading are where it crosses the robot's new sideways axis, its curvature its own (the
+    parabola y = a + b x + c x^2 moved instead bent more each time the robot turned to follow
+    it: c held, curvature 2c / (1 + b^2)^1.5 grew as b shrank)."""
+    e, psi, k = est.arc
+    cos, sin = math.cos(dtheta), math.sin(dtheta)
+    s = ds * math.cos(psi)  # along the arc to where it crosses the new axis: Newton from here
+    for _ in range(CROSSING_STEPS):
+        x, y, h = (float(v[0]) for v in centre_path((e, psi, k), [s]))
+        step = math.cos(h - dtheta)
+        if abs(step) < 1e-6:
+            return None
+        s -= ((x - ds) * cos + y * sin) / step
+    x, y, h = (float(v[0]) for v in centre_path((e, psi, k), [s]))
+    heading = (h - dtheta + math.pi) % (2 * math.pi) - math.pi
+    if not (math.isfinite(s) and abs(heading) < TURNED):
         return None
-    c, bend = est.c, est.bend
+    bend = est.bend
     if bend is not None:  # the bend comes nearer; driven into, its curvature is the lane's
-        bend = (bend[0] - ds, bend[1])
+        bend = (bend[0] - s, bend[1])
         if bend[0] <= 0:
-            c, bend = bend[1] * (1 + b * b) ** 1.5 / 2, None
-    return replace(est, a=a, b=b, c=c, confidence=est.confidence * FORGET, bend=bend)
+            k, bend = bend[1], None
+    b = math.tan(heading)
+    return replace(est, a=-(x - ds) * sin + y * cos, b=b, c=half_curvature(k, b),
+                   confidence=est.confidence * FORGET, bend=bend)
 
 
 def blend(pred, meas, weight):
-    """The prediction moved `weight` (0..1) of the way to the measurement. The bend ahead is
+    """The prediction moved `weight` (0..1) of the way to the measurement: its offset, heading
+    and curvature, and its confidence (module doc). The bend ahead is
     the measurement's where it sees one; where it sees none, the bend predicted fades into
     the arc measured at the same pace (out of the near view, a bend's entry is measured as
     one arc bent less than either of its parts, which is no reason to forget the bend)."""
@@ -114,6 +139,9 @@ def blend(pred, meas, weight):
     bend = meas.bend
     if bend is None and pred.bend is not None:
         bend = (pred.bend[0], towards(pred.bend[1], meas.curvature))
-    return LaneEstimate(towards(pred.a, meas.a), towards(pred.b, meas.b), towards(pred.c, meas.c),
+    (e0, psi0, k0), (e1, psi1, k1) = pred.arc, meas.arc
+    psi, k = towards(psi0, psi1), towards(k0, k1)
+    b = math.tan(psi)
+    return LaneEstimate(towards(e0, e1), b, half_curvature(k, b),
                         towards(pred.confidence, meas.confidence),
                         meas.left, meas.right, meas.reach, width=meas.width, bend=bend)

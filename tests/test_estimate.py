@@ -211,12 +211,34 @@ def test_robot_offset_is_the_distance_across_the_arc():
 def test_predict_moves_the_lane_with_the_robot():
     straight = LaneEstimate(0.05, 0.0, 0.0, 1.0)
     turned = predict(straight, 0.2, math.radians(10))  # 20 cm on, turned 10 degrees left
-    assert turned.a == pytest.approx(0.05)  # parallel lane: the offset stays
-    assert math.degrees(turned.heading) == pytest.approx(10, abs=0.5)  # the lane to the right
-    bend = LaneEstimate(0.0, 0.0, 0.5, 1.0)  # curvature 1 / m to the left
+    # the parallel lane 5 cm to the left, now crossed obliquely by the robot's sideways axis
+    assert turned.a == pytest.approx(0.05 / math.cos(math.radians(10)))
+    assert math.degrees(turned.heading) == pytest.approx(10)  # the lane to the right
+    bend = LaneEstimate(0.0, 0.0, 0.5, 1.0)  # curvature 1 / m to the left: centre (0, 1)
     ahead = predict(bend, 0.2, 0.0)
-    assert ahead.a == pytest.approx(0.5 * 0.2 ** 2) and ahead.b == pytest.approx(0.2)
+    assert ahead.a == pytest.approx(1 - math.sqrt(1 - 0.2 ** 2))  # where x = 0.2 meets it
+    assert ahead.b == pytest.approx(0.2 / math.sqrt(1 - 0.2 ** 2))  # its slope there
+    assert ahead.curvature == pytest.approx(1.0)
     assert turned.confidence == pytest.approx(0.8)  # a prediction is less sure
+
+
+def test_predict_keeps_the_lanes_curvature_as_the_robot_turns_to_follow_it():
+    # a bend of radius 0.5 m turned 45 degrees right of the robot: the robot turns in place
+    # to line up with it. The arc is the same arc; its curvature stays 2 / m (the parabola's
+    # c, held, made it 2 (1 + 1)^1.5 = 5.7 / m once the robot was lined up)
+    psi, k = math.radians(-45), 2.0
+    lane = LaneEstimate(0.0, math.tan(psi), k * (1 + math.tan(psi) ** 2) ** 1.5 / 2, 1.0)
+    assert lane.curvature == pytest.approx(k)
+    lined_up = predict(lane, 0.0, psi)
+    assert (lined_up.a, lined_up.b) == pytest.approx((0.0, 0.0), abs=1e-12)
+    assert lined_up.curvature == pytest.approx(k)
+    # 0.2 m straight on: the circle (centre 0.5 m to the left) meets the robot's sideways
+    # axis where it has turned asin(0.2 / 0.5) left, and still bends 2 / m
+    on = predict(lined_up, 0.2, 0.0)
+    assert on.a == pytest.approx(0.5 - math.sqrt(0.5 ** 2 - 0.2 ** 2))
+    assert on.heading == pytest.approx(-math.asin(0.2 / 0.5))  # the robot right of the lane
+    assert on.curvature == pytest.approx(k)
+    assert predict(lane, 0.0, math.radians(50)) is None  # turned away: the lane runs across
 
 
 def test_predict_brings_the_bend_nearer_and_then_drives_into_it():
@@ -231,8 +253,23 @@ def test_blend_weighs_the_measurement_by_its_weight():
     pred, meas = LaneEstimate(0.0, 0.0, 0.0, 0.5), LaneEstimate(0.1, 0.2, 0.3, 1.0)
     assert blend(pred, meas, 0.0).a == 0.0
     half = blend(pred, meas, 0.5)
-    assert (half.a, half.b, half.c, half.confidence) == pytest.approx((0.05, 0.1, 0.15, 0.75))
+    # the lane's offset, heading and curvature each moved half way, and the confidence
+    assert (half.a, half.heading, half.curvature, half.confidence) == pytest.approx(
+        (0.05, meas.heading / 2, meas.curvature / 2, 0.75))
     assert blend(pred, meas, 1.0).b == pytest.approx(0.2)
+
+
+def test_blend_moves_the_curvature_by_the_weight_whatever_the_headings():
+    # small_loop seed 5 with domain rand, 4.1 s: a straight lane predicted; measured, a lane
+    # turned 55 degrees across the view bending 4.76 / m, at weight 0.15. Blended as the
+    # parabola's coefficients its c (4.76 (1 + b^2)^1.5 / 2 = 12.4) came over to a lane
+    # nearly lined up, which then bent 4.3 / m; as the arc, 0.15 of the way: 0.71 / m
+    pred = LaneEstimate(0.0, 0.0, 0.0, 0.5)
+    b = math.tan(math.radians(-55))
+    meas = LaneEstimate(0.02, b, 4.76 * (1 + b * b) ** 1.5 / 2, 0.25)
+    blended = blend(pred, meas, 0.15)
+    assert blended.curvature == pytest.approx(0.15 * 4.76)
+    assert blended.heading == pytest.approx(0.15 * meas.heading)
 
 
 def test_blend_takes_a_bend_seen_and_fades_one_not_seen():
