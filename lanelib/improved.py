@@ -101,6 +101,9 @@ class ImprovedParams:
                            'lane widths/s', positive)
     curve_slowdown: float = setting(1.143, 'speed divided by (1 + this x |curvature|)',
                                     'lane widths', finite)
+    unsure_slowdown: float = setting(0.5, 'the share of the speed taken off when the estimate is '
+                                     'unsure (times 1 - confidence): the speed is multiplied '
+                                     'by 1 - this x (1 - confidence)', '', fraction)
     lookahead: float = setting(2.571, 'steer at the centre line this far ahead, or nearer where '
                                'the lane is seen nearer', 'lane widths', positive)
     lookahead_min: float = setting(1.714, 'the look-ahead never comes closer than this',

@@ -17,8 +17,9 @@ worse on Duckietown's tight corners, where the robot ran wide and left the lane 
 episodes of its simulator (with this law, 0 of 4): the estimate of a bend seen briefly is
 straighter than the bend, and this law's over-steer on bends is what makes up for it.
 
-Speed: v_max, divided by (1 + curve_slowdown |k_cmd|) on bends, times (0.5 + 0.5 confidence),
-never below v_min; angular.z = v k_cmd within omega_max.
+Speed: v_max, divided by (1 + curve_slowdown |k_cmd|) on bends, times
+(1 - unsure_slowdown (1 - confidence)) (the lecture's Kobuki: half speed when the estimate is
+unsure), never below v_min; angular.z = v k_cmd within omega_max.
 """
 
 import numpy as np
@@ -35,7 +36,8 @@ def curvature(x, y, slope, alpha):
 def command(k_cmd, confidence, p):
     """(linear.x [m/s], angular.z [rad/s]) for a commanded curvature [1/m] and the estimate's
     confidence (0..1); p: ImprovedParams in metres (module doc)."""
-    v = p.v_max / (1.0 + p.curve_slowdown * abs(k_cmd)) * (0.5 + 0.5 * confidence)
+    v = p.v_max / (1.0 + p.curve_slowdown * abs(k_cmd)) * (1.0 - p.unsure_slowdown *
+                                                            (1.0 - confidence))
     v = float(np.clip(v, p.v_min, p.v_max))
     return v, float(np.clip(v * k_cmd, -p.omega_max, p.omega_max))
 

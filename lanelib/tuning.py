@@ -20,8 +20,8 @@ from lanelib.settings import bounds, validate, value_type
 
 LECTURE = ('threshold', 'canny_low', 'canny_high', 'hough_threshold', 'min_line_length',
            'max_line_gap', 'slope_min', 'turn_linear', 'turn_angular', 'straight_linear')
-IMPROVED = ('v_max', 'v_min', 'curve_slowdown', 'lookahead', 'lookahead_min', 'lateral_gain',
-            'omega_max', 'smoothing', 'search_rate')
+IMPROVED = ('v_max', 'v_min', 'curve_slowdown', 'unsure_slowdown', 'lookahead', 'lookahead_min',
+            'lateral_gain', 'omega_max', 'smoothing', 'search_rate')
 TYPES = {int: 'int', float: 'double'}
 
 

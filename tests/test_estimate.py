@@ -3,6 +3,7 @@ known answers (lanelib/estimate.py, lanelib/memory.py, lanelib/steering.py). lan
 for the lane among the lines has its own tests in test_lanes.py."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -341,6 +342,10 @@ def test_speed_and_turn_rate_are_bounded():
     v, omega = command(0.0, 1.0, p)
     assert (v, omega) == (pytest.approx(p.v_max), 0.0)
     assert command(0.0, 0.0, p)[0] == pytest.approx(0.5 * p.v_max)  # unsure: half speed
+    assert command(0.0, 0.5, p)[0] == pytest.approx(0.75 * p.v_max)
+    calmer = replace(p, unsure_slowdown=0.25)  # a quarter off at confidence 0
+    assert command(0.0, 0.0, calmer)[0] == pytest.approx(0.75 * p.v_max)
+    assert command(0.0, 1.0, calmer)[0] == pytest.approx(p.v_max)
     v, omega = command(100.0, 1.0, p)
     assert v == pytest.approx(p.v_min) and omega == 0.5  # never below v_min, saturated
     assert command(-100.0, 1.0, p)[1] == -0.5
