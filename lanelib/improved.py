@@ -14,12 +14,14 @@ Each frame, in the order the data flows, a module each:
 and here what to do with them (command). The estimate and the memory guide each frame's search
 for the lane: the lines are sorted to left and right against the lane expected (the memory's
 centre line, else the prediction), and the lane found is pulled towards where the memory has it
-at the robot (lines seen far ahead place it there only through a long lever). While the lane is
-seen the robot steers at the remembered centre line `memory_lookahead` ahead (else at the
-estimate, as near as it is seen); not seen, it follows the lane remembered round any turn (an arc
-through the robot); lost for `lost_timeout`, it follows that while it lasts, then turns in place
-towards where the lane went, up to `search_angle`, then stops. A lane found after that must be
-the one lost: the robot has not left its lane, so it lies within 3/4 of a lane width of it.
+at the robot (lines seen far ahead place it there only through a long lever); a lane found
+turned at the robot further from the prediction than it can have turned since is not the lane
+(estimate.follows), and the frame counts as one without it. While the lane is seen the robot
+steers at the remembered centre line `memory_lookahead` ahead (else at the estimate, as near as
+it is seen); not seen, it follows the lane remembered round any turn (an arc through the robot);
+lost for `lost_timeout`, it follows that while it lasts, then turns in place towards where the
+lane went, up to `search_angle`, then stops. A lane found after that must be the one lost: the
+robot has not left its lane, so it lies within 3/4 of a lane width of it.
 
 The robot's motion comes from odometry while it comes (topics.Odometry), else from the commands
 sent, for as long as they were sent. Distances and speeds are in lane widths
@@ -33,7 +35,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from lanelib.camera import LECTURE_CAMERA
-from lanelib.estimate import blend, measure, predict
+from lanelib.estimate import blend, follows, measure, predict
 from lanelib.geometry import Mounting
 from lanelib.lanedraw import draw_lane, stage_pictures
 from lanelib.lanefit import LaneFit
@@ -290,9 +292,11 @@ class ImprovedController:
                     guide, anchor = found[0], prior.arc[:2]
         meas, fit = measure(detection.pieces, self.profile, p, guide, anchor, self.held)
         self.mark('lane')
+        blind = self.lost_for > p.lost_timeout  # the estimate from before is stale
+        if meas is not None and prior is not None and not blind and not follows(prior, meas):
+            meas, fit = None, None  # turned further than it can have turned since: not the lane
         self.sides = None if fit is None else fit.sides
         self.held = fit is not None and fit.predicted
-        blind = self.lost_for > p.lost_timeout  # the estimate from before is stale
         # a lane found after one was lost must be the one lost (the robot cannot have left it
         # without a departure); before any lane was seen there is none to lose
         if blind and self.ever_seen and meas is not None and abs(meas.across) > REGAINED * w:

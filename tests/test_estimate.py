@@ -125,6 +125,51 @@ def test_a_lane_running_across_the_view_with_the_robot_inside_it_is_the_robots()
     assert math.degrees(est.heading) == pytest.approx(68, abs=2)
 
 
+
+def test_a_lane_turned_further_than_it_can_have_turned_is_no_lane_until_the_estimate_is_stale():
+    """Between two frames the prediction turns the lane by the robot's own turn: a lane found
+    turned TURN_GATE further at the robot (the next straight's lines across the view at a
+    tight corner, fitted as one lane) is not taken, and the frame counts as one with no lane;
+    a lane within it is blended; once the estimate is stale (lost_timeout) the turned lane is
+    taken."""
+    from types import SimpleNamespace
+
+    from kobuki_lane import LaneParams
+    from lanelib.estimate import TURN_GATE
+    from lanelib.improved import ImprovedController
+
+    def lane(psi_deg):
+        psi = math.radians(psi_deg)
+        half = DT.lane_width / 2 / math.cos(psi)
+        return SimpleNamespace(cluttered=False, pieces=slanted_pieces(half, psi, 'yellow') +
+                               slanted_pieces(-half, psi, 'white'))
+
+    assert math.radians(68) > TURN_GATE > math.radians(10)
+    robot = ImprovedController(LaneParams(), ImprovedParams(lane='duckietown', memory=0.0))
+    robot(lane(0), 0.0)
+    assert abs(robot.estimate.heading) < 0.02 and robot.lost_for == 0.0
+    robot(lane(-68), 0.125)  # the lane 68 degrees to the right a frame later: not the lane
+    assert robot.lost_for == pytest.approx(0.125) and robot.sides is None
+    assert abs(robot.estimate.heading) < 0.1  # the prediction, turned by the robot's own turn
+    robot(lane(-10), 0.25)  # 10 degrees: the lane, blended
+    assert robot.lost_for == 0.0 and 0.02 < robot.estimate.heading < math.radians(10)
+    t = 0.25
+    while robot.lost_for <= 1.0:  # lost_timeout: the estimate is stale
+        t += 0.125
+        robot(lane(-68), t)
+    robot(lane(-68), t + 0.125)
+    assert robot.lost_for == 0.0
+    assert math.degrees(robot.estimate.heading) == pytest.approx(68, abs=3)
+
+
+def test_follows_compares_the_headings_at_the_robot():
+    from lanelib.estimate import TURN_GATE, follows
+
+    ahead = LaneEstimate(0.0, 0.0, 0.0, 1.0)
+    assert follows(ahead, LaneEstimate(0.05, -math.tan(TURN_GATE - 0.01), 0.0, 1.0))
+    assert not follows(ahead, LaneEstimate(0.0, math.tan(TURN_GATE + 0.01), 0.0, 1.0))
+
+
 def path_pieces(arc, bend, side, colour, lengths=(0.12, 0.8), step=0.06):
     """Pieces of the lane's line on `side` (+1 left, -1 right) of the centre line arc + bend
     (lanefit.centre_path), between arc lengths lengths[0] and lengths[1]."""
