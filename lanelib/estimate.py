@@ -6,7 +6,7 @@
               little of it is seen, or the robot would be more than half a lane outside it
     predict   the last estimate moved with the robot's motion since (and a little less sure)
     follows   whether a measurement can be the lane predicted: its heading at the robot within
-              TURN_GATE of the prediction's
+              a gate of the prediction's (ImprovedParams.turn_gate)
     blend     the prediction and the measurement weighed by the measurement's confidence
 
 The estimate is the centre line as y = a + b x + c x^2 about the robot (x ahead, y left): its
@@ -30,10 +30,6 @@ ONE_LINE = 0.7  # how sure one line alone makes the estimate, against both
 FORGET = 0.8  # how much of its confidence a prediction keeps, per frame
 TURNED = math.radians(80)  # a lane predicted to run more than this across the view is lost
 CROSSING_STEPS = 4  # Newton steps to where the lane crosses the robot's sideways axis
-# [rad] (29 degrees) the most a lane measured may be turned at the robot from the lane predicted
-# there: the prediction has already turned it by the robot's own turn and moved it along its
-# curvature, so what is left between two frames is the estimate's error (follows)
-TURN_GATE = 0.5
 
 
 @dataclass
@@ -133,14 +129,16 @@ def predict(est, ds, dtheta):
                    confidence=est.confidence * FORGET, bend=bend)
 
 
-def follows(pred, meas):
+def follows(pred, meas, gate):
     """Whether the lane measured can be the lane predicted: turned at the robot no more than
-    TURN_GATE from it. A lane turned further is another line's: at a tight corner the next
-    straight's lines run across the view, and fitted as one lane through the robot they turn it
-    by up to 80 degrees in one frame, at full confidence (gym-duckietown, small_loop seed 5 with
-    domain rand: predicted -3 degrees, measured +80). The controller counts such a frame as one
-    with no lane; once the estimate is stale (lost_timeout) a lane found replaces it."""
-    return abs(meas.heading - pred.heading) <= TURN_GATE
+    `gate` [rad] from it (0: any lane can). The prediction has already turned the lane by the
+    robot's own turn and moved it along its curvature, so what is left is the estimate's error;
+    a lane turned much further is another line's: at a tight corner the next straight's lines
+    run across the view, and fitted as one lane through the robot they turned it by up to 80
+    degrees in one frame, at full confidence (gym-duckietown, small_loop seed 5 with domain
+    rand: predicted -3 degrees, measured +80). The controller counts such a frame as one with
+    no lane; once the estimate is stale (lost_timeout) a lane found replaces it."""
+    return not gate or abs(meas.heading - pred.heading) <= gate
 
 
 def blend(pred, meas, weight):

@@ -15,13 +15,14 @@ and here what to do with them (command). The estimate and the memory guide each 
 for the lane: the lines are sorted to left and right against the lane expected (the memory's
 centre line, else the prediction), and the lane found is pulled towards where the memory has it
 at the robot (lines seen far ahead place it there only through a long lever); a lane found
-turned at the robot further from the prediction than it can have turned since is not the lane
-(estimate.follows), and the frame counts as one without it. While the lane is seen the robot
-steers at the remembered centre line `memory_lookahead` ahead (else at the estimate, as near as
-it is seen); not seen, it follows the lane remembered round any turn (an arc through the robot);
-lost for `lost_timeout`, it follows that while it lasts, then turns in place towards where the
-lane went, up to `search_angle`, then stops. A lane found after that must be the one lost: the
-robot has not left its lane, so it lies within 3/4 of a lane width of it.
+turned at the robot more than `turn_gate` from the prediction is not the lane (estimate.follows;
+off by default, the duckiebot preset's 0.5 rad), and the frame counts as one without it. While
+the lane is seen the robot steers at the remembered centre line `memory_lookahead` ahead (else
+at the estimate, as near as it is seen); not seen, it follows the lane remembered round any turn
+(an arc through the robot); lost for `lost_timeout`, it follows that while it lasts, then turns
+in place towards where the lane went, up to `search_angle`, then stops. A lane found after that
+must be the one lost: the robot has not left its lane, so it lies within 3/4 of a lane width of
+it.
 
 The robot's motion comes from odometry while it comes (topics.Odometry), else from the commands
 sent, for as long as they were sent. Distances and speeds are in lane widths
@@ -94,6 +95,10 @@ class ImprovedParams:
                               "'cluttered' in the decision records", '', positive)
     smoothing: float = setting(0.6, 'weight of a full-confidence measurement against the '
                                'prediction', '', fraction)
+    turn_gate: float = setting(0.0, 'a lane found turned more than this at the robot from the '
+                               'lane predicted there is not taken, and the frame counts as one '
+                               'without a lane (estimate.follows); 0: off', 'rad',
+                               between(0, math.pi))
     lost_timeout: float = setting(1.0, 'the lane unseen this long: lost (the robot follows the '
                                   'lane remembered while it lasts, then searches, then stops)',
                                   's', positive)
@@ -293,7 +298,8 @@ class ImprovedController:
         meas, fit = measure(detection.pieces, self.profile, p, guide, anchor, self.held)
         self.mark('lane')
         blind = self.lost_for > p.lost_timeout  # the estimate from before is stale
-        if meas is not None and prior is not None and not blind and not follows(prior, meas):
+        if (meas is not None and prior is not None and not blind and
+                not follows(prior, meas, p.turn_gate)):
             meas, fit = None, None  # turned further than it can have turned since: not the lane
         self.sides = None if fit is None else fit.sides
         self.held = fit is not None and fit.predicted

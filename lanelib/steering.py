@@ -36,8 +36,8 @@ def curvature(x, y, slope, alpha):
 def command(k_cmd, confidence, p):
     """(linear.x [m/s], angular.z [rad/s]) for a commanded curvature [1/m] and the estimate's
     confidence (0..1); p: ImprovedParams in metres (module doc)."""
-    v = p.v_max / (1.0 + p.curve_slowdown * abs(k_cmd)) * (1.0 - p.unsure_slowdown *
-                                                            (1.0 - confidence))
+    unsure = p.unsure_slowdown  # written so that 0.5 gives the bits 0.5 + 0.5 confidence gave
+    v = p.v_max / (1.0 + p.curve_slowdown * abs(k_cmd)) * ((1.0 - unsure) + unsure * confidence)
     v = float(np.clip(v, p.v_min, p.v_max))
     return v, float(np.clip(v * k_cmd, -p.omega_max, p.omega_max))
 

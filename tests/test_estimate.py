@@ -128,14 +128,13 @@ def test_a_lane_running_across_the_view_with_the_robot_inside_it_is_the_robots()
 
 def test_a_lane_turned_further_than_it_can_have_turned_is_no_lane_until_the_estimate_is_stale():
     """Between two frames the prediction turns the lane by the robot's own turn: a lane found
-    turned TURN_GATE further at the robot (the next straight's lines across the view at a
+    turned turn_gate further at the robot (the next straight's lines across the view at a
     tight corner, fitted as one lane) is not taken, and the frame counts as one with no lane;
     a lane within it is blended; once the estimate is stale (lost_timeout) the turned lane is
     taken."""
     from types import SimpleNamespace
 
     from kobuki_lane import LaneParams
-    from lanelib.estimate import TURN_GATE
     from lanelib.improved import ImprovedController
 
     def lane(psi_deg):
@@ -144,8 +143,10 @@ def test_a_lane_turned_further_than_it_can_have_turned_is_no_lane_until_the_esti
         return SimpleNamespace(cluttered=False, pieces=slanted_pieces(half, psi, 'yellow') +
                                slanted_pieces(-half, psi, 'white'))
 
-    assert math.radians(68) > TURN_GATE > math.radians(10)
-    robot = ImprovedController(LaneParams(), ImprovedParams(lane='duckietown', memory=0.0))
+    gate = 0.5  # the duckiebot preset's
+    assert math.radians(68) > gate > math.radians(10)
+    robot = ImprovedController(LaneParams(), ImprovedParams(lane='duckietown', memory=0.0,
+                                                            turn_gate=gate))
     robot(lane(0), 0.0)
     assert abs(robot.estimate.heading) < 0.02 and robot.lost_for == 0.0
     robot(lane(-68), 0.125)  # the lane 68 degrees to the right a frame later: not the lane
@@ -160,14 +161,20 @@ def test_a_lane_turned_further_than_it_can_have_turned_is_no_lane_until_the_esti
     robot(lane(-68), t + 0.125)
     assert robot.lost_for == 0.0
     assert math.degrees(robot.estimate.heading) == pytest.approx(68, abs=3)
+    # without the gate (the default) the turned lane is blended at once
+    free = ImprovedController(LaneParams(), ImprovedParams(lane='duckietown', memory=0.0))
+    free(lane(0), 0.0)
+    free(lane(-68), 0.125)
+    assert free.lost_for == 0.0 and free.estimate.heading > 0.3
 
 
 def test_follows_compares_the_headings_at_the_robot():
-    from lanelib.estimate import TURN_GATE, follows
+    from lanelib.estimate import follows
 
     ahead = LaneEstimate(0.0, 0.0, 0.0, 1.0)
-    assert follows(ahead, LaneEstimate(0.05, -math.tan(TURN_GATE - 0.01), 0.0, 1.0))
-    assert not follows(ahead, LaneEstimate(0.0, math.tan(TURN_GATE + 0.01), 0.0, 1.0))
+    assert follows(ahead, LaneEstimate(0.05, -math.tan(0.49), 0.0, 1.0), 0.5)
+    assert not follows(ahead, LaneEstimate(0.0, math.tan(0.51), 0.0, 1.0), 0.5)
+    assert follows(ahead, LaneEstimate(0.0, math.tan(1.2), 0.0, 1.0), 0.0)  # 0: off
 
 
 def path_pieces(arc, bend, side, colour, lengths=(0.12, 0.8), step=0.06):
