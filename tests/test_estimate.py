@@ -125,7 +125,6 @@ def test_a_lane_running_across_the_view_with_the_robot_inside_it_is_the_robots()
     assert math.degrees(est.heading) == pytest.approx(68, abs=2)
 
 
-
 def test_a_lane_turned_further_than_it_can_have_turned_is_no_lane_until_the_estimate_is_stale():
     """Between two frames the prediction turns the lane by the robot's own turn: a lane found
     turned turn_gate further at the robot (the next straight's lines across the view at a
