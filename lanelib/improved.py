@@ -95,6 +95,12 @@ class ImprovedParams:
                               "'cluttered' in the decision records", '', positive)
     smoothing: float = setting(0.6, 'weight of a full-confidence measurement against the '
                                'prediction', '', fraction)
+    one_line_width: str = setting('profile', "with one line in view the lane lies half this "
+                                  "width beside it: 'profile' (the lane profile's, or "
+                                  "lane_width) or 'measured' (the width last measured with "
+                                  'both lines in view, which a camera pitched a little off '
+                                  'makes more or less than the profile says)',
+                                  choices=('profile', 'measured'))
     turn_gate: float = setting(0.0, 'a lane found turned more than this at the robot from the '
                                'lane predicted there is not taken, and the frame counts as one '
                                'without a lane (estimate.follows); 0: off', 'rad',
@@ -198,6 +204,7 @@ class ImprovedController:
         self.view = None  # the FloorView of the frames' size
         self.cluttered = False  # the last frame had more than max_pieces pieces of line
         self.ever_seen = False  # a lane has been seen since the start (reset() keeps it)
+        self.width = None  # [m] between the lines, last measured with both in view
         self.reset()
 
     def tuned_settings(self):
@@ -295,7 +302,11 @@ class ImprovedController:
                     # is the estimate's, moved with the robot: an arc fitted to the memory of
                     # a bend's entry (straight, then bending) is turned the wrong way there
                     guide, anchor = found[0], prior.arc[:2]
-        meas, fit = measure(detection.pieces, self.profile, p, guide, anchor, self.held)
+        # one_line_width 'measured': with one line in view, the lane lies half the width last
+        # measured with both beside it (the profile's half, with the camera's pitch a little
+        # off and the lines looking further apart, moved the lane sideways as a line left view)
+        meas, fit = measure(detection.pieces, self.profile, p, guide, anchor, self.held,
+                            self.width if p.one_line_width == 'measured' else None)
         self.mark('lane')
         blind = self.lost_for > p.lost_timeout  # the estimate from before is stale
         if (meas is not None and prior is not None and not blind and
@@ -309,6 +320,8 @@ class ImprovedController:
             meas = None  # another lane (the far leg of a U-turn): keep searching
         if meas is not None:
             self.ever_seen = True
+            if meas.left and meas.right:  # one line's fit gives no width, only the one given
+                self.width = meas.width
             self.lost_for, self.search = 0.0, None
             self.estimate = blend(prior, meas, p.smoothing * meas.confidence) if (
                 prior and not blind) else meas

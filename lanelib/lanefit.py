@@ -267,7 +267,7 @@ def _regions(pieces):
 
 
 def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tolerance=0.3,
-              anchor=None, prior_first=False):
+              anchor=None, prior_first=False, width=None):
     """The best-supported lane (LaneFit) among the pieces, or None. prior: (e, psi, k) of the
     lane expected from earlier frames; when it, refitted, explains `explained` of the line in
     view with the robot inside it, it is the lane (LaneFit.predicted), whatever else the search
@@ -278,27 +278,29 @@ def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tole
     pulled a little towards it. The width between the lines is fitted within width_tolerance
     of lane_width (a camera's pitch a little off, a track taped a little wider, make the lines
     look that much further apart: forced to the profile's width the lane would tilt to fit
-    them); with one line in view it stays lane_width."""
+    them); with one line in view it stays `width`, the width last measured (default
+    lane_width; held within the same bounds)."""
     if not pieces:
         return None
-    half = lane_width / 2
+    limits = (lane_width * (1 - width_tolerance), lane_width * (1 + width_tolerance))
+    width = lane_width if width is None else float(np.clip(width, *limits))
+    half = width / 2
     points = _points(pieces, 2.6 * lane_width)
     allowed = np.array([[1 in s, -1 in s] for s in (profile.sides(p.colour) for p in pieces)])
     total = float(points[2].sum())
     # priors: k towards 0, weakly (a point x ahead moves k x^2 / 2 with k, so this weighs about
-    # as much as 0.2 % of the points a lane width ahead), the width towards the profile's; and
+    # as much as 0.2 % of the points a lane width ahead), the width towards `width`; and
     # with a lane expected, its offset and heading at the robot, as much as 3 % of the
     # points near the robot: the lines seen far ahead place the lane there well, but its
     # offset and heading under the robot only through a long lever (a bend's entry seen from
     # a level camera fits an arc turned the wrong way), which the expected lane steadies
     weights = [0.0, 0.0, 0.002 * total * lane_width ** 4, 0.02 * total]
-    target = [0.0, 0.0, 0.0, lane_width]
+    target = [0.0, 0.0, 0.0, width]
     anchor = anchor if anchor is not None else None if prior is None else prior[:2]
     if anchor is not None:
         weights[:2] = PRIOR_PULL * total, PRIOR_PULL * total * lane_width ** 2
         target[:2] = anchor
     priors = (weights, target)
-    limits = (lane_width * (1 - width_tolerance), lane_width * (1 + width_tolerance))
     search = (pieces, points, allowed, lane_width, priors, limits, _regions(pieces), anchor)
 
     def holds(found):  # the prior, refitted, is the lane: both its lines in view (one line
@@ -311,15 +313,15 @@ def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tole
                     and support >= explained * total)
 
     if prior is not None and prior_first:
-        found = _fit_seeds(np.array([[*prior, lane_width]], float), *search)[1]
+        found = _fit_seeds(np.array([[*prior, width]], float), *search)[1]
         if holds(found):
             return _lane(pieces, found, points, priors, limits, lane_width, predicted=True)
-    seeds = [] if prior is None else [(*prior, lane_width)]
+    seeds = [] if prior is None else [(*prior, width)]
     for piece, (may_left, may_right) in zip(pieces, allowed):
         x0, y0 = piece.summary[0][1], piece.summary[1][1]
         for side in [s for s, may in ((1, may_left), (-1, may_right)) if may]:
             e = y0 - side * half / math.cos(piece.phi) - math.tan(piece.phi) * x0
-            seeds += [(e, piece.phi, k / lane_width, lane_width) for k in SEED_CURVATURES]
+            seeds += [(e, piece.phi, k / lane_width, width) for k in SEED_CURVATURES]
     found, first = _fit_seeds(np.array(seeds, float), *search)
     if prior is not None and holds(first):
         return _lane(pieces, first, points, priors, limits, lane_width, predicted=True)

@@ -401,3 +401,51 @@ def test_speed_and_turn_rate_are_bounded():
     assert v == pytest.approx(p.v_min) and omega == 0.5  # never below v_min, saturated
     assert command(-100.0, 1.0, p)[1] == -0.5
     assert steer(0.8, 0.1, 0.0, 1.0, p) == command(curvature(0.8, 0.1, 0.0, 3.0), 1.0, p)
+
+
+def test_one_line_is_placed_half_the_width_last_measured_beside_it():
+    """With both lines in view the width between them is measured (a camera pitched a little
+    off, a track taped a little wider, make it more than the profile's); with one line left in
+    view the lane lies half that width beside it, not half the profile's, so the robot's offset
+    does not jump when a line leaves the view; a width given beyond width_tolerance is held at
+    its bound."""
+    w = DT.lane_width * 1.2
+    both, _ = measure(line_pieces(w / 2, 'yellow', dashed=True) + line_pieces(-w / 2, 'white'),
+                      DT, P)
+    assert both.width == pytest.approx(w, abs=0.005) and abs(both.offset) < 0.005
+    one, _ = measure(line_pieces(-w / 2, 'white'), DT, P, width=both.width)
+    assert one.offset == pytest.approx(0.0, abs=0.005) and one.width == pytest.approx(w, abs=0.005)
+    profile, _ = measure(line_pieces(-w / 2, 'white'), DT, P)  # no width measured yet
+    assert profile.offset == pytest.approx((w - DT.lane_width) / 2, abs=0.005)
+    held, _ = measure(line_pieces(-w / 2, 'white'), DT, P, width=3 * DT.lane_width)
+    assert held.width == pytest.approx((1 + P.width_tolerance) * DT.lane_width, abs=0.005)
+
+
+@pytest.mark.parametrize('one_line_width', ['measured', 'profile'])
+def test_the_controller_carries_the_width_measured_into_frames_with_one_line(one_line_width):
+    """With one_line_width 'measured' the controller gives measure the width last measured with
+    both lines in view, and only such a frame changes it (a one-line fit's width is only what
+    it was given, moved by the pull towards the lane expected: carried on, it crept to its
+    bound, 1.3 lane widths, in the benchmark's lecture world); with 'profile' (the default)
+    one line is placed half the profile's width from the lane."""
+    from types import SimpleNamespace
+
+    from kobuki_lane import LaneParams
+    from lanelib.improved import ImprovedController
+
+    w = DT.lane_width * 1.2
+    both = SimpleNamespace(cluttered=False, pieces=line_pieces(w / 2, 'yellow', dashed=True) +
+                           line_pieces(-w / 2, 'white'))
+    white = SimpleNamespace(cluttered=False, pieces=line_pieces(-w / 2, 'white'))
+    controller = ImprovedController(LaneParams(), ImprovedParams(
+        lane='duckietown', memory=0.0, one_line_width=one_line_width))
+    controller(both, 0.0)
+    assert controller.width == pytest.approx(w, abs=0.005)
+    for t in (0.125, 0.25, 0.375):
+        controller(white, t)
+        assert controller.width == pytest.approx(w, abs=0.005)  # one line does not change it
+        if one_line_width == 'measured':
+            assert controller.estimate.width == pytest.approx(w, abs=0.005)
+            assert abs(controller.estimate.offset) < 0.005
+        else:  # the profile's width, not the one measured (the lane moves sideways)
+            assert controller.estimate.width < w - 0.02
