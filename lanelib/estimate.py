@@ -86,8 +86,8 @@ def measure(pieces, profile, p, prior=None, anchor=None, prior_first=False, widt
     arc (e, psi, k) of the lane expected; anchor: (offset, heading) of the lane expected at
     the robot, if known better than the prior's; prior_first: try the prior alone first (it
     was the lane the frame before: lanefit.find_lane); width: the width between the lines last
-    measured, which one line alone is placed half of from the lane's centre (default: the
-    profile's)."""
+    measured with both in view: one line alone lies half of it from the lane's centre
+    (default: the profile's)."""
     fit = find_lane(pieces, profile, p.lane_width, prior, width_tolerance=p.width_tolerance,
                     anchor=anchor, prior_first=prior_first, width=width)
     if fit is None or fit.left + fit.right < MIN_SEEN * p.lane_width or abs(fit.across) > fit.width:
