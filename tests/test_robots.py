@@ -49,6 +49,22 @@ def test_a_preset_sets_the_camera_lane_and_rate_and_flags_outrank_it(tmp_path):
     assert (improved.camera_height, improved.camera_pitch) == (0.12, 18.0)  # and the file
 
 
+def test_every_controller_setting_the_duckiebot_preset_names_reaches_the_controller():
+    """Each improved-controller number in config/duckiebot.yaml (its speeds, curve_slowdown,
+    one_line_width, turn_gate...) is what the controller runs with, unless a flag says
+    otherwise: none is read and then dropped."""
+    preset = load_robot('duckiebot', KNOWN).settings
+    named = {key: value for key, value in preset.items()
+             if key in ImprovedParams.__dataclass_fields__}
+    assert {'curve_slowdown', 'unsure_slowdown', 'one_line_width', 'turn_gate'} <= set(named)
+    (_, _, _, improved, _), _ = settings('--robot', 'duckiebot')
+    for key, value in named.items():
+        assert getattr(improved, key) == value, key
+        assert value != getattr(ImprovedParams(), key), f'{key} is the default: not needed'
+    (_, _, _, improved, _), _ = settings('--robot', 'duckiebot', '--curve-slowdown', '2')
+    assert improved.curve_slowdown == 2.0
+
+
 def test_a_preset_file_of_ones_own_with_paths_beside_it(tmp_path):
     (tmp_path / 'lane.yaml').write_text(
         'lane_width: 0.3\nleft: {colour: white, width: 0.02}\n'
