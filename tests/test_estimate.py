@@ -4,14 +4,16 @@ for the lane among the lines has its own tests in test_lanes.py."""
 
 import math
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
+from kobuki_lane import LaneParams
 from lanelib import lanefit
 from lanelib.colour import Piece
 from lanelib.estimate import LaneEstimate, blend, measure, predict
-from lanelib.improved import ImprovedParams
+from lanelib.improved import REGAINED, ImprovedController, ImprovedParams
 from lanelib.lanefit import bent_distance, centre_path, robot_offset, signed_distance
 from lanelib.lanes import BUILTIN
 from lanelib.memory import LaneMemory
@@ -20,6 +22,11 @@ from lanelib.steering import command, curvature, steer
 
 DT = BUILTIN['duckietown']
 P = ImprovedParams(lane='duckietown').in_metres(DT.lane_width)
+
+
+def frame(pieces):
+    """A detection holding only these pieces of line, as the controller takes it."""
+    return SimpleNamespace(cluttered=False, pieces=pieces)
 
 
 def line_pieces(y, colour, along=(0.15, 0.8), step=0.1, dashed=False):
@@ -73,20 +80,13 @@ def test_a_lane_found_after_one_was_lost_must_be_the_one_lost_but_a_first_lane_i
     """After a lane was seen and lost, a lane the robot stands outside of (the far leg of a
     U-turn) is not taken for it; a controller that has seen no lane yet (a node started
     beside its lane, a single picture) takes the lane it finds."""
-    from types import SimpleNamespace
-
-    from kobuki_lane import LaneParams
-    from lanelib.improved import REGAINED, ImprovedController
-
     w = DT.lane_width
     off = -0.9 * w  # beyond REGAINED (0.75 lane widths) from the robot
     assert 0.9 > REGAINED
-    beside = SimpleNamespace(cluttered=False, pieces=line_pieces(off + w / 2, 'yellow',
-                                                                 dashed=True) +
-                             line_pieces(off - w / 2, 'white'))
-    own = SimpleNamespace(cluttered=False, pieces=line_pieces(w / 2, 'yellow', dashed=True) +
-                          line_pieces(-w / 2, 'white'))
-    nothing = SimpleNamespace(cluttered=False, pieces=[])
+    beside = frame(line_pieces(off + w / 2, 'yellow', dashed=True) +
+                   line_pieces(off - w / 2, 'white'))
+    own = frame(line_pieces(w / 2, 'yellow', dashed=True) + line_pieces(-w / 2, 'white'))
+    nothing = frame([])
     params = ImprovedParams(lane='duckietown', search_angle=0.0)
 
     fresh = ImprovedController(LaneParams(), params)
@@ -131,16 +131,11 @@ def test_a_lane_turned_further_than_it_can_have_turned_is_no_lane_until_the_esti
     tight corner, fitted as one lane) is not taken, and the frame counts as one with no lane;
     a lane within it is blended; once the estimate is stale (lost_timeout) the turned lane is
     taken."""
-    from types import SimpleNamespace
-
-    from kobuki_lane import LaneParams
-    from lanelib.improved import ImprovedController
 
     def lane(psi_deg):
         psi = math.radians(psi_deg)
         half = DT.lane_width / 2 / math.cos(psi)
-        return SimpleNamespace(cluttered=False, pieces=slanted_pieces(half, psi, 'yellow') +
-                               slanted_pieces(-half, psi, 'white'))
+        return frame(slanted_pieces(half, psi, 'yellow') + slanted_pieces(-half, psi, 'white'))
 
     gate = 0.5  # the duckiebot preset's
     assert math.radians(68) > gate > math.radians(10)
@@ -428,15 +423,9 @@ def test_the_controller_carries_the_width_measured_into_frames_with_one_line(one
     it was given, moved by the pull towards the lane expected: carried on, it crept to its
     bound, 1.3 lane widths, in the benchmark's lecture world); with 'profile' (the default)
     one line is placed half the profile's width from the lane."""
-    from types import SimpleNamespace
-
-    from kobuki_lane import LaneParams
-    from lanelib.improved import ImprovedController
-
     w = DT.lane_width * 1.2
-    both = SimpleNamespace(cluttered=False, pieces=line_pieces(w / 2, 'yellow', dashed=True) +
-                           line_pieces(-w / 2, 'white'))
-    white = SimpleNamespace(cluttered=False, pieces=line_pieces(-w / 2, 'white'))
+    both = frame(line_pieces(w / 2, 'yellow', dashed=True) + line_pieces(-w / 2, 'white'))
+    white = frame(line_pieces(-w / 2, 'white'))
     controller = ImprovedController(LaneParams(), ImprovedParams(
         lane='duckietown', memory=0.0, one_line_width=one_line_width))
     controller(both, 0.0)
