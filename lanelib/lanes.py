@@ -11,7 +11,12 @@ Built in:
                 solid edge line on its right. Appearance specification: 61 cm tiles, white
                 tape 2 in (5 cm) wide, yellow tape 1 in (2.5 cm) wide in 2 in pieces with 1 in
                 gaps; dt-core's lane_filter puts the tapes' inner edges 0.20 m apart, which is
-                0.2375 m between the lines' centres
+                0.2375 m between the lines' centres. The layout itself has them further
+                apart: with the white tape at the tile's edge and the yellow in its middle,
+                0.28 m between the centres (gym-duckietown's road texture: 0.26 and 0.28 m).
+                The improved controller measures the width between the lines it sees (within
+                width_tolerance), and the duckiebot preset's distances, in lane widths, were
+                measured with 0.2375 (docs/benchmarks.md)
     autorace    TurtleBot3 AutoRace: a yellow solid line on the left and a white solid line on
                 the right, 15 mm wide, 285 mm apart between centres (ROBOTIS autorace_track,
                 RBiz Challenge 2017 straight tile: two 500 x 15 mm lines, placed 11.22 in apart)
