@@ -26,6 +26,12 @@ import numpy as np
 from lanelib.geometry import pixels_to_floor
 
 BOX = 0.2  # [image widths] the surroundings a pixel's brightness is judged against
+# a piece is longer than it is wide by at least this: 1.5 for a solid line (a blob, a glint or a
+# sheet of paper is not a line), 1.2 for a dashed one, whose dashes are short by design
+# (Duckietown's: 2 by 1 in) and measure barely 1.5 times their width once the mask's blur has
+# widened them and a camera pitched a little off has shortened them (gym-duckietown with
+# domain rand: 0.041 to 0.047 m by 0.029 to 0.032, half the dashes in view of a frame)
+ELONGATION = {'solid': 1.5, 'dashed': 1.2}
 POINTS = 3  # points that stand for a piece when the lane is fitted (Piece.summary)
 
 
@@ -101,7 +107,7 @@ class Piece:
 
 
 def tape_pieces(mask, colour, matrix, mounting, tape_width, min_length, step, row0=0,
-                max_points=120, side=None, budget=1500):
+                max_points=120, side=None, budget=1500, elongation=ELONGATION['solid']):
     """The pieces of a colour mask (rows row0.. of an undistorted image with camera matrix
     `matrix`) on the floor: each connected region, seen on the floor, cut across into parts
     about `step` metres long by distance ahead, and a part still longer than 1.5 `step` (a
@@ -142,7 +148,7 @@ def tape_pieces(mask, colour, matrix, mounting, tape_width, min_length, step, ro
             band = np.flatnonzero(which == b)
             for part in _halves(x[band], y[band], 1.5 * step):
                 piece = _piece(x[band[part]], y[band[part]], cut[band[part]], colour,
-                               tape_width, min_length, max_points, (colour, i))
+                               tape_width, min_length, max_points, (colour, i), elongation)
                 if piece is not None:
                     pieces.append(piece)
     return pieces
@@ -193,7 +199,8 @@ def view_sides(view):
     return (view > 0) & (inner == 0)
 
 
-def _piece(x, y, cut, colour, tape_width, min_length, max_points, region=None):
+def _piece(x, y, cut, colour, tape_width, min_length, max_points, region=None,
+           elongation=ELONGATION['solid']):
     if cut.any():
         # where the view cuts the tape, the tape's cross-sections are partial and their middle
         # is off its centre: leave out the points level (along the tape) with the cut
@@ -208,7 +215,7 @@ def _piece(x, y, cut, colour, tape_width, min_length, max_points, region=None):
     # a uniform strip of length L has a standard deviation of L / sqrt(12) along it
     length = math.sqrt(12 * max(spread[1], 0.0))
     width = math.sqrt(12 * max(spread[0], 0.0))
-    if (length < min_length or length < 1.5 * width or
+    if (length < min_length or length < elongation * width or
             not 0.4 * tape_width <= width <= 3.0 * tape_width):
         return None
     d = axes[:, 1] if axes[0, 1] >= 0 else -axes[:, 1]  # pointing ahead

@@ -4,6 +4,9 @@ A profile gives the lane width between the two lines' centres and, for each side
 colour (white, yellow, or any), whether it is solid or dashed, and the tape's width. Where a
 side names a colour, the improved controller counts a line on that side only where the colour
 says so, and a line of the other colour, or a line on the wrong side of it, is not its lane's.
+A colour only dashed lines have is looked for in short pieces: a dash need only be a little
+longer than it is wide (colour.ELONGATION), where a piece of a solid line must be half as long
+again as it is wide.
 
 Built in:
     lecture     the lecture's floor: two tape lines of any colour, 0.35 m apart (the default)

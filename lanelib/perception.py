@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 
 from lanelib.camera import LECTURE_CAMERA, undistortion_maps
-from lanelib.colour import colour_masks, floor_boxes, tape_pieces, view_sides
+from lanelib.colour import ELONGATION, colour_masks, floor_boxes, tape_pieces, view_sides
 from lanelib.geometry import floor_to_row
 from lanelib.stages import Detection, as_bgr, slope_sum
 
@@ -99,10 +99,13 @@ def perceive(frame, view, profile, p, piece_length, keep_stages=False, mark=None
     mark('colour')
     pieces = []
     for colour in profile.colours:
-        tape = max(line.width for line in (profile.left, profile.right) if line.colour == colour)
+        lines = [line for line in (profile.left, profile.right) if line.colour == colour]
+        # a colour only dashed lines have is cut into dashes; one a solid line has, into lines
+        style = 'dashed' if all(line.style == 'dashed' for line in lines) else 'solid'
         pieces += tape_pieces(cv2.bitwise_and(masks[colour], floor), colour, view.matrix,
-                              p.mounting, tape, 0.1 * p.lane_width, piece_length,
-                              row0=first, side=sides)
+                              p.mounting, max(line.width for line in lines),
+                              0.1 * p.lane_width, piece_length, row0=first, side=sides,
+                              elongation=ELONGATION[style])
     pieces.sort(key=lambda piece: -piece.length)
     detection.cluttered = len(pieces) > p.max_pieces
     detection.pieces, detection.masks = pieces[:p.max_pieces], (masks, first)

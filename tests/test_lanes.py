@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from kobuki_lane import LaneParams, main
-from lanelib.colour import Piece, colour_masks, floor_boxes, tape_pieces, view_sides
+from lanelib.colour import ELONGATION, Piece, colour_masks, floor_boxes, tape_pieces, view_sides
 from lanelib.geometry import Mounting, floor_to_pixels
 from lanelib.improved import ImprovedController, ImprovedParams
 from lanelib.lanefit import find_lane, signed_distance
@@ -164,6 +164,41 @@ def test_pieces_much_wider_or_narrower_than_the_tape_are_not_kept():
     assert tape_pieces(mask, 'white', K, MOUNT, 0.05, 0.02, step=0.15) == []
     # and a tape of the right width is
     assert len(tape_pieces(painted([(0.0, 0.05)]), 'white', K, MOUNT, 0.05, 0.02, step=0.15)) > 5
+
+
+def test_a_dash_need_only_be_a_little_longer_than_wide_a_piece_of_solid_line_more():
+    # dashes 4 cm long and 3 cm wide, 8 cm apart, running ahead on the left: what
+    # gym-duckietown's 2 by 1 in dashes measure with domain rand (1.3 to 1.5 times as long)
+    dashes = [painted([(0.12, 0.03)], along=(x0, x0 + 0.04)) for x0 in (0.3, 0.38, 0.46)]
+    mask = dashes[0] | dashes[1] | dashes[2]
+    kept = tape_pieces(mask, 'yellow', K, MOUNT, 0.025, 0.02, step=0.06,
+                       elongation=ELONGATION['dashed'])
+    assert len(kept) == 3
+    for piece in kept:  # where the dash is, and along the line
+        assert abs(np.mean(piece.y) - 0.12) < 0.01 and abs(piece.phi) < math.radians(20)
+    assert tape_pieces(mask, 'yellow', K, MOUNT, 0.025, 0.02, step=0.06) == []  # solid's rule
+    # a square of tape is no dash
+    square = painted([(0.12, 0.04)], along=(0.3, 0.34))
+    assert tape_pieces(square, 'yellow', K, MOUNT, 0.025, 0.02, step=0.06,
+                       elongation=ELONGATION['dashed']) == []
+
+
+def test_the_improved_perception_cuts_a_colour_only_dashed_lines_have_into_dashes(monkeypatch):
+    import lanelib.perception as perception
+
+    asked = {}
+
+    def spy(mask, colour, *args, elongation=ELONGATION['solid'], **kw):
+        asked[colour] = elongation
+        return []
+
+    monkeypatch.setattr(perception, 'tape_pieces', spy)
+    frame = floor_scene()
+    for lane, wanted in (('duckietown', {'yellow': 1.2, 'white': 1.5}), ('lecture', {'any': 1.5})):
+        asked.clear()
+        improved = ImprovedController(LaneParams(), ImprovedParams(lane=lane), camera=None)
+        improved.perceive(frame)
+        assert asked == wanted
 
 
 def test_a_tape_the_view_cuts_keeps_its_middle():
