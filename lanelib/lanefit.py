@@ -12,7 +12,8 @@ the arc, within a tolerance that starts at half a lane width and tightens to a q
 lane kept is the one whose two lines are best supported: sqrt(left) + sqrt(right) of the line
 lengths they explain, discounted with distance ahead (far points are less certain), for a
 robot outside the lane it names, and, with a lane expected, for lying away from where it was
-expected at the robot (one line alone fits a lane on either side of it equally well); a piece
+expected at the robot (one line alone fits a lane on either side of it equally well), and of
+lanes supported alike, the one whose lines lie nearest their pieces; a piece
 running across the fitted lane's lines where it lies (over ASKEW) is on neither. So a
 neighbouring lane's lines, a centre line the robot is crossing, a line of the wrong colour on
 a side, are not its lane's, and one line alone still places the lane, half a lane width beside
@@ -43,6 +44,7 @@ BEND_STARTS = (0.25, 0.5, 0.75)
 BEND_GAIN = 0.5
 BEND_MIN = 0.1  # [1 / lane width] a smaller change of curvature is no bend
 BEND_FLOOR = 0.01  # [lane widths] one arc as near its points as this (RMS) needs no bend
+TIE = 1e-6  # lanes scored within this fraction of the best are equally supported (rounding)
 
 
 def signed_distance(x, y, e, psi, k):
@@ -365,7 +367,14 @@ def _fit_seeds(seeds, pieces, points, allowed, lane_width, priors, limits, regio
         # line from one frame to the next, flipped the estimate by a lane width)
         score = score * np.exp(-0.5 * ((lanes[:, 0] - anchor[0]) / half) ** 2)
     score[~sides.any(axis=1)] = -1.0
-    best = int(np.argmax(score))
+    # of lanes that explain the same line equally (the same pieces: near the robot, a lane
+    # turned at the robot and bending back runs along them as well as a straight one), the
+    # one nearest its pieces, not the first in the seeds' order: on a real Duckietown frame
+    # (visual_control_test.png) a straight lane and one turned 44 degrees bending back 2.9 /m
+    # scored alike, and the order of the pieces chose between them
+    tied = np.flatnonzero(score >= score.max() - TIE * max(score.max(), 0.0))
+    miss = ((distance[tied] - on[tied] * half[tied, None]) ** 2 * (on[tied] != 0) * w).sum(axis=1)
+    best = int(tied[np.argmin(miss)])
     return tuple((score[i], lanes[i], sides[i], float(left[i] + right[i])) if score[i] > 0
                  else None for i in (best, 0))
 

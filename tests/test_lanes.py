@@ -264,6 +264,34 @@ def test_signed_distance_is_exact_for_arcs_and_lines():
     assert np.allclose(signed_distance(x, y, 0.1, 0.0, 0.0), y - 0.1)
 
 
+def test_the_lane_chosen_does_not_depend_on_the_order_the_pieces_come_in():
+    # the pieces of a real Duckietown frame (visual_control_test.png, the duckiebot preset:
+    # x, y [m], direction [rad], colour, length, width [m]): two dashes and a white piece near
+    # the robot, a calibration board's edge and yellow things beyond it. A straight lane and
+    # one turned 44 degrees at the robot, bending back 2.9 /m to run along the same three
+    # pieces, explain them alike; the one nearer its pieces is the lane, whatever their order
+    def piece(x0, y0, phi, colour, length, width):
+        s = np.linspace(-length / 2, length / 2, 20)
+        return Piece(x0 + s * math.cos(phi), y0 + s * math.sin(phi), phi, colour, length, width)
+
+    pieces = [piece(0.654, -0.121, -0.143, 'yellow', 0.164, 0.019),
+              piece(0.672, -0.334, -0.580, 'yellow', 0.102, 0.037),
+              piece(0.247, -0.100, 0.076, 'white', 0.101, 0.032),
+              piece(0.409, 0.126, 1.304, 'white', 0.097, 0.047),
+              piece(0.727, -0.306, -0.349, 'yellow', 0.090, 0.016),
+              piece(0.239, 0.124, -0.065, 'yellow', 0.041, 0.024),
+              piece(0.300, 0.120, -0.082, 'yellow', 0.036, 0.025),
+              piece(0.362, 0.196, 0.665, 'yellow', 0.034, 0.010)]
+    rng = np.random.default_rng(1)
+    chosen = set()
+    for _ in range(30):
+        fit = find_lane([pieces[i] for i in rng.permutation(len(pieces))], DT, DT.lane_width)
+        chosen.add((round(fit.e, 3), round(fit.psi, 2), round(fit.k, 1)))
+    assert len(chosen) == 1
+    (e, psi, k), = chosen
+    assert abs(psi) < 0.05 and abs(k) < 0.5  # the straight lane the near pieces run along
+
+
 def test_a_straight_lane_is_found_where_it_is():
     half = DT.lane_width / 2
     pieces = line_pieces(0.03 + half, 'yellow', dashed=True) + line_pieces(0.03 - half, 'white')
