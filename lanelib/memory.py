@@ -122,9 +122,14 @@ def fit_centre(x, y, w, ridge=0.05, x0=0.0):
     """Weighted least squares y = a + b x + c x^2, with c pulled towards 0 on short spans.
     The pull acts on the curve written about x0 (put x0 amid the points): there a and b are
     what the points say, whatever becomes of c (written about 0, pulling c on a short span far
-    ahead would tilt the line instead of bending it)."""
+    ahead would tilt the line instead of bending it). Solved from the weighted moments of the
+    points (the normal equations): the memory holds about 10,000 points, and a design matrix
+    of them cost four times as long."""
     u = x - x0
-    A = np.stack([np.ones_like(u), u, u ** 2], axis=1) * np.sqrt(w)[:, None]
-    reg = np.diag([0.0, 1e-4, ridge]) * w.sum()
-    a, b, c = np.linalg.solve(A.T @ A + reg, A.T @ (y * np.sqrt(w)))
+    wu = w * u
+    wu2 = wu * u
+    s0, s1, s2 = w.sum(), wu.sum(), wu2.sum()
+    s3, s4 = wu2 @ u, wu2 @ (u * u)
+    normal = np.array([[s0, s1, s2], [s1, s2 + 1e-4 * s0, s3], [s2, s3, s4 + ridge * s0]])
+    a, b, c = np.linalg.solve(normal, [w @ y, wu @ y, wu2 @ y])
     return float(a - b * x0 + c * x0 ** 2), float(b - 2 * c * x0), float(c)

@@ -16,7 +16,7 @@ from lanelib.estimate import LaneEstimate, blend, measure, predict
 from lanelib.improved import REGAINED, ImprovedController, ImprovedParams
 from lanelib.lanefit import bent_distance, centre_path, robot_offset, signed_distance
 from lanelib.lanes import BUILTIN
-from lanelib.memory import LaneMemory
+from lanelib.memory import LaneMemory, fit_centre
 from lanelib.robot import arc_step
 from lanelib.steering import command, curvature, steer
 
@@ -362,6 +362,21 @@ def test_the_memory_fits_the_centre_line_ahead_and_an_arc_round_a_u_turn():
     arc, _ = memory.arc((0.0, 0.0, 1.5), 1.0, 0.06)  # from the bend as estimated
     assert arc[2] == pytest.approx(1 / r, rel=0.05) and abs(arc[0]) < 0.01
     assert memory.centre_line(2.0, 3.0, 0.1) is None  # nothing remembered there
+
+
+def test_the_centre_fit_is_the_ridged_least_squares_parabola():
+    # fit_centre solves the normal equations from the points' moments: the same parabola as
+    # least squares on the design matrix with the ridge's rows
+    rng = np.random.default_rng(3)
+    x = rng.uniform(0.2, 0.6, 400)
+    y = 0.05 - 0.3 * x + 1.2 * x ** 2 + rng.normal(0.0, 0.01, x.size)
+    w = rng.uniform(0.2, 1.0, x.size)
+    u = x - 0.4
+    rows = np.vstack([np.stack([np.ones_like(u), u, u ** 2], axis=1) * np.sqrt(w)[:, None],
+                      np.diag(np.sqrt([0.0, 1e-4, 0.05]) * math.sqrt(w.sum()))])
+    a, b, c = np.linalg.lstsq(rows, np.concatenate([y * np.sqrt(w), np.zeros(3)]), rcond=None)[0]
+    assert fit_centre(x, y, w, x0=0.4) == pytest.approx(
+        (a - 0.4 * b + 0.16 * c, b - 0.8 * c, c), abs=1e-9)
 
 
 # ---------------------------------------------------------------- the steering law
