@@ -124,7 +124,7 @@ def fit_centre(x, y, w, ridge=0.05, x0=0.0):
     what the points say, whatever becomes of c (written about 0, pulling c on a short span far
     ahead would tilt the line instead of bending it). Solved from the weighted moments of the
     points (the normal equations): the memory holds about 10,000 points, and a design matrix
-    of them cost four times as long."""
+    of them took about three times as long (0.27 to 0.29 ms a call against 0.10)."""
     u = x - x0
     wu = w * u
     wu2 = wu * u
