@@ -101,8 +101,8 @@ class Piece:
         self.region = region  # the connected region of the mask it was cut from: one tape
         self.w = np.full(len(x), length / len(x))
         runs = np.array_split(np.argsort(x * math.cos(phi) + y * math.sin(phi)), POINTS)
-        self.summary = (np.array([x[i].mean() for i in runs]),
-                        np.array([y[i].mean() for i in runs]),
+        self.summary = (np.array([x[i].sum() / len(i) for i in runs]),  # the means (np.mean
+                        np.array([y[i].sum() / len(i) for i in runs]),  # divides the same sum)
                         np.full(POINTS, length / POINTS))
 
 
@@ -159,7 +159,7 @@ def _axis(x, y):
     axes (the longest last; axes[:, 1] is the longest's direction). The 2x2 covariance's
     eigenvectors in closed form (numpy's general ones cost more than the rest of a piece)."""
     n = len(x)
-    dx, dy = x - x.mean(), y - y.mean()
+    dx, dy = x - x.sum() / n, y - y.sum() / n  # the means, as np.mean makes them, sooner
     sxx, syy, sxy = (float(dx @ dx) / (n - 1), float(dy @ dy) / (n - 1),
                      float(dx @ dy) / (n - 1))
     half, root = (sxx + syy) / 2, math.hypot((sxx - syy) / 2, sxy)

@@ -104,14 +104,19 @@ def _bent_distances(x, y, q):
     bent = np.where(straight, 1.0, k)
     x0 = np.where(straight, s0 * np.cos(psi), (np.sin(h0) - np.sin(psi)) / bent)
     y0 = np.where(straight, e + s0 * np.sin(psi), e + (np.cos(psi) - np.cos(h0)) / bent)
-    return np.where(_along(x, y, e, psi, k) > s0, _distance(x - x0, y, y0, h0, k2)[0],
-                    _distance(x, y, e, psi, k)[0])
+    frame = _arc_frame(x, y, e, psi)
+    return np.where(_along_in(*frame[:2], k) > s0, _distance(x - x0, y, y0, h0, k2)[0],
+                    _distance_in(*frame, k)[0])
 
 
 def _along(x, y, e, psi, k):
     """How far along the arc (e, psi, k) [m] the points' nearest points on its circle lie;
     arrays of arcs (e, psi, k of shape (S, 1)) give an (S, N) array."""
-    u, v, _, _ = _arc_frame(x, y, e, psi)
+    return _along_in(*_arc_frame(x, y, e, psi)[:2], k)
+
+
+def _along_in(u, v, k):
+    """_along from the points in the arc's own frame."""
     flat = np.abs(k) < 1e-9
     return np.where(flat, u, np.arctan2(k * u, 1 - k * v) / np.where(flat, 1.0, k))
 
@@ -123,9 +128,14 @@ def _arc_frame(x, y, e, psi):
     return x * c + dy * s, dy * c - x * s, s, c
 
 
-def _distance(x, y, e, psi, k, jacobian=False):
-    """signed_distance, and with `jacobian` its derivatives in e, psi and k."""
-    u, v, s, c = _arc_frame(x, y, e, psi)
+def _distance(x, y, e, psi, k, jacobian=False, out=None):
+    """signed_distance, and with `jacobian` its derivatives in e, psi and k (an array
+    (..., 3), or written into `out`, and None returned)."""
+    return _distance_in(*_arc_frame(x, y, e, psi), k, jacobian, out)
+
+
+def _distance_in(u, v, s, c, k, jacobian=False, out=None):
+    """_distance from the points in the arc's own frame (_arc_frame's u, v, sin, cos)."""
     ku, kv1 = k * u, 1 - k * v
     root = np.sqrt(ku * ku + kv1 * kv1)  # k r
     squared = u * u + v * v
@@ -140,22 +150,27 @@ def _distance(x, y, e, psi, k, jacobian=False):
     q_k, r_k = -squared, (ku * u - kv1 * v) / root
     q_e, r_e = -(q_u * s + q_v * c), -(r_u * s + r_v * c)
     q_psi, r_psi = q_u * v - q_v * u, r_u * v - r_v * u
-    return d, np.stack([(q_e - d * r_e) / den, (q_psi - d * r_psi) / den,
-                        (q_k - d * r_k) / den], axis=-1)
+    columns = (q_e - d * r_e) / den, (q_psi - d * r_psi) / den, (q_k - d * r_k) / den
+    if out is None:
+        return d, np.stack(columns, axis=-1)
+    for i, column in enumerate(columns):  # no stacked copy made and then copied into out
+        out[..., i] = column
+    return d, None
 
 
-def _distances(x, y, arcs, jacobian=False):
+def _distances(x, y, arcs, jacobian=False, out=None):
     e, psi, k = (arcs[:, i:i + 1] for i in range(3))
-    return _distance(x, y, e, psi, k, jacobian)
+    return _distance(x, y, e, psi, k, jacobian, out)
 
 
-def fit_lanes(x, y, sides, w, lanes, priors, limits, iterations=ITERATIONS):
+def fit_lanes(x, y, sides, w, lanes, priors, limits, iterations=ITERATIONS, first=None):
     """Weighted least squares of the points' distances from their lines, for S lanes at once:
     x, y (N,) points; sides (S, N) each point's line (+1 left, -1 right, 0 neither), w (S, N)
     their weights; lanes (S, 4) the starts (e, psi, k, width), a point on side s lying
     s * width / 2 from the centre arc. priors: (weights, target), each (4,): each of e, psi,
     k, width pulled towards its target with that weight; limits: the width's bounds (equal:
-    held there). Gauss-Newton."""
+    held there). first: (distances (S, N), their derivatives (S, N, 3)) at the starts, when
+    the caller has them (_distances with jacobian). Gauss-Newton."""
     lanes = lanes.astype(float).copy()
     pull, target = (np.asarray(v, float) for v in priors)
     pull = pull + 1e-9
@@ -164,15 +179,17 @@ def fit_lanes(x, y, sides, w, lanes, priors, limits, iterations=ITERATIONS):
     jac = np.empty(sides.shape + (4,))
     jac[..., 3] = -sides / 2  # the width's column: the same every step
     pulled = np.diag(pull)
-    for _ in range(iterations):
-        d, jac[..., :3] = _distances(x, y, lanes, jacobian=True)
+    low, high = np.array([-1.4, -30.0, limits[0]]), np.array([1.4, 30.0, limits[1]])
+    for i in range(iterations):
+        if i == 0 and first is not None:
+            d, jac[..., :3] = first[0], first[1]
+        else:
+            d, _ = _distances(x, y, lanes, jacobian=True, out=jac[..., :3])
         wj = np.swapaxes(jac * w[..., None], 1, 2)  # (S, 4, N)
         a = wj @ jac + pulled
         b = (wj @ (d - sides * lanes[:, 3:4] / 2)[..., None])[..., 0] + pull * (lanes - target)
         lanes -= np.linalg.solve(a, b[..., None])[..., 0]
-        lanes[:, 1] = np.clip(lanes[:, 1], -1.4, 1.4)
-        lanes[:, 2] = np.clip(lanes[:, 2], -30.0, 30.0)
-        lanes[:, 3] = np.clip(lanes[:, 3], *limits)
+        lanes[:, 1:] = np.minimum(np.maximum(lanes[:, 1:], low), high)  # np.clip's values
     return lanes
 
 
@@ -340,10 +357,14 @@ def _fit_seeds(seeds, pieces, points, allowed, lane_width, priors, limits, regio
     x, y, w = points
     lanes = seeds
     for tol in TOLERANCES:
-        sides = _sides(_distances(x, y, lanes)[0], allowed, lanes[:, 3] / 2, tol * lane_width,
-                       regions)
+        # the distances with their derivatives: the sides need the one, the fit's first step
+        # both (the same distances, made once)
+        slopes = np.empty((len(lanes), len(x), 3))
+        distance, _ = _distances(x, y, lanes, jacobian=True, out=slopes)
+        sides = _sides(distance, allowed, lanes[:, 3] / 2, tol * lane_width, regions)
         on = np.repeat(sides, POINTS, axis=1)
-        lanes = fit_lanes(x, y, on, (on != 0) * w, lanes, priors, limits)
+        lanes = fit_lanes(x, y, on, (on != 0) * w, lanes, priors, limits,
+                          first=(distance, slopes))
         # seeds from pieces of one line mostly grow into one lane: fit it once
         grid = np.round(lanes / (0.02 * lane_width, 0.02, 0.1 / lane_width, 0.02 * lane_width))
         lanes = lanes[_firsts(grid)]
@@ -463,16 +484,15 @@ def _fit_bend(points, on, lane, lane_width, priors, limits):
     c, r, jac[:, :, :5] = evaluated(q)
     damping = np.full(len(q), 1e-3)
     pulled = np.diag(pull)
+    low = np.array([-1.4, -30.0, -30.0, x.min(), limits[0]])
+    high = np.array([1.4, 30.0, 30.0, x.max(), limits[1]])
     for _ in range(3 * ITERATIONS):
         wj = jac.transpose(0, 2, 1) * w
         normal = wj @ jac + pulled
         scaled = normal + damping[:, None, None] * (normal * np.eye(6))
         gradient = (wj @ r[..., None])[..., 0] + pull * (q - target)
         trial = q - np.linalg.solve(scaled, gradient[..., None])[..., 0]
-        trial[:, 1] = np.clip(trial[:, 1], -1.4, 1.4)
-        trial[:, 2:4] = np.clip(trial[:, 2:4], -30.0, 30.0)
-        trial[:, 4] = np.clip(trial[:, 4], x.min(), x.max())
-        trial[:, 5] = np.clip(trial[:, 5], *limits)
+        trial[:, 1:] = np.minimum(np.maximum(trial[:, 1:], low), high)  # np.clip's values
         c_trial, r_trial, j_trial = evaluated(trial)
         better = c_trial < c
         q[better], c[better], r[better] = trial[better], c_trial[better], r_trial[better]
