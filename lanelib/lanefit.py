@@ -44,6 +44,11 @@ BEND_STARTS = (0.25, 0.5, 0.75)
 BEND_GAIN = 0.5
 BEND_MIN = 0.1  # [1 / lane width] a smaller change of curvature is no bend
 BEND_FLOOR = 0.01  # [lane widths] one arc as near its points as this (RMS) needs no bend
+# every fit's steps are held within these: a lane turned at most 1.4 rad (80 degrees) at the
+# robot, bending at most 30 /m (a circle 3.3 cm in radius), so that a step on few points stays
+# among lanes a camera could see
+HEADING_LIMIT = 1.4  # [rad]
+CURVATURE_LIMIT = 30.0  # [1/m]
 TIE = 1e-6  # lanes scored within this fraction of the best are equally supported (rounding)
 
 
@@ -179,7 +184,8 @@ def fit_lanes(x, y, sides, w, lanes, priors, limits, iterations=ITERATIONS, firs
     jac = np.empty(sides.shape + (4,))
     jac[..., 3] = -sides / 2  # the width's column: the same every step
     pulled = np.diag(pull)
-    low, high = np.array([-1.4, -30.0, limits[0]]), np.array([1.4, 30.0, limits[1]])
+    low = np.array([-HEADING_LIMIT, -CURVATURE_LIMIT, limits[0]])  # psi, k, width
+    high = np.array([HEADING_LIMIT, CURVATURE_LIMIT, limits[1]])
     for i in range(iterations):
         if i == 0 and first is not None:
             d, jac[..., :3] = first[0], first[1]
@@ -484,8 +490,8 @@ def _fit_bend(points, on, lane, lane_width, priors, limits):
     c, r, jac[:, :, :5] = evaluated(q)
     damping = np.full(len(q), 1e-3)
     pulled = np.diag(pull)
-    low = np.array([-1.4, -30.0, -30.0, x.min(), limits[0]])
-    high = np.array([1.4, 30.0, 30.0, x.max(), limits[1]])
+    low = np.array([-HEADING_LIMIT, -CURVATURE_LIMIT, -CURVATURE_LIMIT, x.min(), limits[0]])
+    high = np.array([HEADING_LIMIT, CURVATURE_LIMIT, CURVATURE_LIMIT, x.max(), limits[1]])
     for _ in range(3 * ITERATIONS):
         wj = jac.transpose(0, 2, 1) * w
         normal = wj @ jac + pulled
