@@ -5,8 +5,9 @@ heading psi [rad] and curvature k [1/m, + bends left]: an arc, not a polynomial 
 Duckietown bend that turns 90 degrees within half a metre is one lane. Its left line lies half a
 lane width to its left, its right line half a lane width to its right.
 
-The search: every piece of line in view, on every side its colour allows, seeds lanes parallel
-to it, straight and bending (and the lane predicted from earlier frames, when there is one). Each
+The search: every piece of line in view, on every side its colour allows, seeds lanes whose
+line runs along it where it lies, straight and bending (each bending seed traced back along its
+arc to the robot), and the lane predicted from earlier frames, when there is one. Each
 seed is fitted to the pieces that lie on its two lines (Gauss-Newton on their distances from
 the arc, within a tolerance that starts at half a lane width and tightens to a quarter), and the
 lane kept is the one whose two lines are best supported: sqrt(left) + sqrt(right) of the line
@@ -345,12 +346,32 @@ def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tole
     for piece, (may_left, may_right) in zip(pieces, allowed):
         x0, y0 = piece.summary[0][1], piece.summary[1][1]
         for side in [s for s, may in ((1, may_left), (-1, may_right)) if may]:
-            e = y0 - side * half / math.cos(piece.phi) - math.tan(piece.phi) * x0
-            seeds += [(e, piece.phi, k / lane_width, width) for k in SEED_CURVATURES]
+            seeds += _seeds_along(x0, y0, piece.phi, side * half, lane_width, width)
     found, first = _fit_seeds(np.array(seeds, float), *search)
     if prior is not None and holds(first):
         return _lane(pieces, first, points, priors, limits, lane_width, predicted=True)
     return None if found is None else _lane(pieces, found, points, priors, limits, lane_width)
+
+
+def _seeds_along(x0, y0, phi, side, lane_width, width):
+    """Seeds (e, psi, k, width) of lanes, one per SEED_CURVATURES, whose line `side` [m] to
+    the left of the centre runs through (x0, y0) in the direction phi: the centre arc through
+    the point abreast of it, heading phi there, traced back to the robot's sideways axis (a
+    bending lane's heading at the robot is not the piece's: a bend's outer line seen across the
+    view, seeded turned as the piece and then bent, began a quarter turn from the lane). A
+    circle that never reaches the axis seeds nothing."""
+    s, c = math.sin(phi), math.cos(phi)
+    xc, yc = x0 + side * s, y0 - side * c
+    seeds = []
+    for k in (q / lane_width for q in SEED_CURVATURES):
+        if k == 0.0:
+            seeds.append((yc - math.tan(phi) * xc, phi, 0.0, width))
+            continue
+        a = s - k * xc
+        if abs(a) < 1.0:
+            psi = math.asin(a)
+            seeds.append((yc + (c - math.cos(psi)) / k, psi, k, width))
+    return seeds
 
 
 def _fit_seeds(seeds, pieces, points, allowed, lane_width, priors, limits, regions=None,

@@ -125,6 +125,24 @@ def test_a_lane_running_across_the_view_with_the_robot_inside_it_is_the_robots()
     assert math.degrees(est.heading) == pytest.approx(68, abs=2)
 
 
+@pytest.mark.parametrize('side', [1, -1])
+def test_a_seed_runs_along_its_piece_where_the_piece_lies(side):
+    # a piece of a line 0.3 m round a bend of radius 0.24 m (curvature one lane width's
+    # worth, a seed curvature), turned 72 degrees from the lane's heading at the robot: the
+    # seed of that curvature is the lane itself, although the piece runs nearly across the
+    # view; the straight seed is the piece's own line, half a lane width over
+    k, half = side / DT.lane_width, DT.lane_width / 2
+    arc = (0.02, 0.1, k)
+    x, y, h = centre_path(arc, [0.3])
+    assert math.degrees(abs(h[0] - arc[1])) == pytest.approx(72, abs=1)
+    x0, y0 = x[0] - side * half * math.sin(h[0]), y[0] + side * half * math.cos(h[0])
+    seeds = lanefit._seeds_along(x0, y0, h[0], side * half, DT.lane_width, DT.lane_width)
+    bent = [q for q in seeds if q[2] == pytest.approx(k)]
+    assert len(bent) == 1 and bent[0][:2] == pytest.approx(arc[:2], abs=1e-9)
+    e, psi, _, _ = [q for q in seeds if q[2] == 0.0][0]
+    assert psi == h[0] and signed_distance(x0, y0, e, psi, 0.0) == pytest.approx(side * half)
+
+
 def test_a_lane_turned_further_than_it_can_have_turned_is_no_lane_until_the_estimate_is_stale():
     """Between two frames the prediction turns the lane by the robot's own turn: a lane found
     turned turn_gate further at the robot (the next straight's lines across the view at a
