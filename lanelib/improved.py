@@ -30,6 +30,8 @@ sent, for as long as they were sent. Distances and speeds are in lane widths
 on a 0.24 m one.
 """
 
+import contextlib
+import copy
 import math
 from dataclasses import dataclass, replace
 
@@ -125,6 +127,10 @@ class ImprovedParams:
                                   'direction (1 = pure pursuit; lanelib/steering.py)', '',
                                   positive)
     omega_max: float = setting(1.5, 'turn rate limit', 'rad/s', positive)
+    latency: float = setting(0.0, 'steer on the lane where it will be when the command acts: '
+                             'the estimate and the memory moved on by the last command for '
+                             "this long (a frame's time from the camera to the wheels); 0: off",
+                             's', between(0, 1))
     memory: float = setting(4.0, "remember the centre line seen this long (moved with the "
                             "robot's motion: odometry, else the commands) and steer on it; "
                             '0: steer on the latest estimate only', 's', non_negative)
@@ -381,9 +387,9 @@ class ImprovedController:
         if self.estimate is None:
             return self.give_up()
         if self.lost_for <= p.lost_timeout:
-            steered = self.followed() if self.lost_for > 0 else None
-            steered = steered or self.remembered() or self.seen()
-            return Command(self.decision(), *steered)
+            with self.ahead(p.latency):
+                steered = self.followed() if self.lost_for > 0 else None
+                return Command(self.decision(), *(steered or self.remembered() or self.seen()))
         if not p.search_angle:
             return self.give_up()  # the plain stop
         if self.search is None:
@@ -395,6 +401,25 @@ class ImprovedController:
         if turned >= math.radians(p.search_angle) or spent >= p.search_time:
             return self.give_up()
         return Command('search', 0.0, direction * p.search_rate)
+
+    @contextlib.contextmanager
+    def ahead(self, seconds):
+        """Within it, the estimate and the memory are where they will be `seconds` on, the
+        robot driving as last commanded: a command acts only after the frame's trip from the
+        camera to the wheels, and by then the robot has moved on (0.13 s at 0.2 m/s: 2.6 cm)."""
+        if not seconds:
+            yield
+            return
+        estimate, memory = self.estimate, self.memory
+        v, omega = self.last
+        self.estimate = predict(estimate, v * seconds, omega * seconds) or estimate
+        if memory is not None:
+            self.memory = copy.copy(memory)  # moving it makes new arrays: the kept one stays
+            self.memory.move(v, omega, seconds)
+        try:
+            yield
+        finally:
+            self.estimate, self.memory = estimate, memory
 
     def search_direction(self):
         """+1 (left) or -1: where the lane was last seen going, the way the estimate's centre

@@ -180,6 +180,36 @@ def test_a_lane_turned_further_than_it_can_have_turned_is_no_lane_until_the_esti
     assert free.lost_for == 0.0 and free.estimate.heading > 0.3
 
 
+def test_latency_steers_on_the_lane_where_it_will_be_when_the_command_acts():
+    """With `latency`, the command is the one for the lane moved on by the last command for
+    that long (predict), and the estimate kept is the one measured; 0 steers on it as it is."""
+    w = DT.lane_width
+    pieces = frame(line_pieces(0.02 + w / 2, 'yellow', dashed=True) +
+                   line_pieces(0.02 - w / 2, 'white'))
+    commands = {}
+    for latency in (0.0, 0.13):
+        ctl = ImprovedController(LaneParams(), ImprovedParams(lane='duckietown', memory=0.0,
+                                                              latency=latency))
+        ctl(pieces, 0.0)
+        ctl.sent(SimpleNamespace(linear_x=0.2, angular_z=0.8))  # turning left, off the lane
+        measured = ctl.estimate
+        commands[latency] = ctl.command()
+        assert ctl.estimate is measured
+    ctl.estimate = predict(measured, 0.2 * 0.13, 0.8 * 0.13)
+    ahead = ctl.seen()
+    assert (commands[0.13].linear_x, commands[0.13].angular_z) == ahead
+    ctl.estimate = measured
+    assert (commands[0.0].linear_x, commands[0.0].angular_z) == ctl.seen()
+    assert commands[0.13].angular_z < commands[0.0].angular_z - 0.05  # turned further: back
+    remembering = ImprovedController(LaneParams(), ImprovedParams(lane='duckietown',
+                                                                  latency=0.13))
+    remembering(pieces, 0.0)
+    remembering.sent(SimpleNamespace(linear_x=0.2, angular_z=0.8))
+    memory, pose = remembering.memory, remembering.memory.pose.copy()
+    remembering.command()
+    assert remembering.memory is memory and np.array_equal(memory.pose, pose)
+
+
 def test_follows_compares_the_headings_at_the_robot():
     from lanelib.estimate import follows
 
