@@ -44,6 +44,7 @@ class LaneEstimate:
     points: tuple = None  # the centre-line points the fit rests on: x, y, weight (robot frame)
     width: float = None  # [m] between the lines, as measured
     bend: tuple = None  # (s0 [m], k2 [1/m]): from s0 along it the lane bends k2 (lanefit)
+    spread: float = 0.0  # the width's change per metre ahead, as measured (lanefit._halves)
 
     @property
     def offset(self):  # robot left of the lane centre [m]
@@ -87,9 +88,13 @@ def measure(pieces, profile, p, prior=None, anchor=None, prior_first=False, widt
     the robot, if known better than the prior's; prior_first: try the prior alone first (it
     was the lane the frame before: lanefit.find_lane); width: the width between the lines last
     measured with both in view: one line alone lies half of it from the lane's centre
-    (default: the profile's)."""
+    (default: the profile's). With p.pitch_tolerance the lines may splay (lanefit._halves)."""
+    # a pitch off by d stretches the floor drawn by about 1 + tan(d) x / h at x ahead (h the
+    # camera's height): the width between the lines changes by lane_width tan(d) / h a metre
+    spread_limit = p.lane_width * math.tan(math.radians(p.pitch_tolerance)) / p.camera_height
     fit = find_lane(pieces, profile, p.lane_width, prior, width_tolerance=p.width_tolerance,
-                    anchor=anchor, prior_first=prior_first, width=width)
+                    anchor=anchor, prior_first=prior_first, width=width,
+                    spread_limit=spread_limit)
     if fit is None or fit.left + fit.right < MIN_SEEN * p.lane_width or abs(fit.across) > fit.width:
         return None, fit
     b = math.tan(fit.psi)
@@ -98,7 +103,8 @@ def measure(pieces, profile, p, prior=None, anchor=None, prior_first=False, widt
     cx, _, cw = fit.centre
     return LaneEstimate(fit.e, b, half_curvature(fit.k, b), confidence,
                         int(np.sum(fit.sides == 1)), int(np.sum(fit.sides == -1)),
-                        float(np.average(cx, weights=cw)), fit.centre, fit.width, fit.bend), fit
+                        float(np.average(cx, weights=cw)), fit.centre, fit.width, fit.bend,
+                        fit.spread), fit
 
 
 def predict(est, ds, dtheta):
@@ -160,4 +166,5 @@ def blend(pred, meas, weight):
     b = math.tan(psi)
     return LaneEstimate(towards(e0, e1), b, half_curvature(k, b),
                         towards(pred.confidence, meas.confidence),
-                        meas.left, meas.right, meas.reach, width=meas.width, bend=bend)
+                        meas.left, meas.right, meas.reach, width=meas.width, bend=bend,
+                        spread=meas.spread)

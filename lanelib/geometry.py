@@ -75,3 +75,16 @@ def floor_to_pixels(x, y, matrix, mounting):
     u = matrix[0, 0] * (rel @ x_cam) / depth + matrix[0, 2]
     v = matrix[1, 1] * (rel @ y_cam) / depth + matrix[1, 2]
     return u, v, ok
+
+
+def repitched(x, y, mounting, turn_deg):
+    """Floor points (robot frame) found with `mounting`, moved to where they lie if the camera
+    looks `turn_deg` further down than the mounting says: each pixel's ray turned down as much
+    (exact for a camera turned about its own sideways axis; a pitch off by d draws a point
+    d_true ahead of the lens at (d_true + h tan d) / (1 - d_true tan d / h), and its sideways
+    distance 1 / (cos d (1 - d_true tan d / h)) as far out)."""
+    t = math.tan(math.radians(turn_deg))
+    ahead = np.asarray(x, float) - mounting.forward
+    scale = np.maximum(1.0 + ahead * t / mounting.height, 1e-3)  # (beyond the horizon: far)
+    return (mounting.forward + (ahead - mounting.height * t) / scale,
+            np.asarray(y, float) / (scale * math.cos(math.radians(turn_deg))))

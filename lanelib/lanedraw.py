@@ -37,7 +37,7 @@ def draw_lane(controller, detection, command):
         for side, colour in SIDE_COLOURS.items():
             x, y = arc_points(e, lengths, side * p.lane_width / 2)
             draw_curve(image, x, y, lambda a, b: floor_to_pixels(a, b, controller.matrix,
-                                                                 p.mounting), colour)
+                                                                 controller.mounting), colour)
     text = f'{command.decision}  v {command.linear_x:.2f} w {command.angular_z:+.2f}'
     if e is not None:
         text += (f'  offset {100 * e.offset:+.1f} cm  heading {math.degrees(e.heading):+.1f} '

@@ -20,6 +20,11 @@ neighbouring lane's lines, a centre line the robot is crossing, a line of the wr
 a side, are not its lane's, and one line alone still places the lane, half a lane width beside
 it, on the side it was.
 
+With a spread allowed (find_lane's spread_limit), the width between the lines may change in
+proportion to the distance ahead: a camera pitched a little off the mounting the floor is drawn
+with splays lines parallel on the floor (or closes them), and fitted parallel they turned and
+bent the lane.
+
 Where the lane's curvature changes in view (a bend's entry seen from its straight, an S-bend's
 turn the other way), the lane kept is refitted as two arcs, the second going on from the first
 (a bend: where, and its curvature), when they fit its pieces much better: one arc through the
@@ -173,31 +178,59 @@ def fit_lanes(x, y, sides, w, lanes, priors, limits, iterations=ITERATIONS, firs
     """Weighted least squares of the points' distances from their lines, for S lanes at once:
     x, y (N,) points; sides (S, N) each point's line (+1 left, -1 right, 0 neither), w (S, N)
     their weights; lanes (S, 4) the starts (e, psi, k, width), a point on side s lying
-    s * width / 2 from the centre arc. priors: (weights, target), each (4,): each of e, psi,
-    k, width pulled towards its target with that weight; limits: the width's bounds (equal:
-    held there). first: (distances (S, N), their derivatives (S, N, 3)) at the starts, when
-    the caller has them (_distances with jacobian). Gauss-Newton."""
+    s * width / 2 from the centre arc, or (S, 5) (e, psi, k, width, spread), s * (width +
+    spread x) / 2 (_halves). priors: (weights, target), each of the lanes' length: each
+    parameter pulled towards its target with that weight; limits: the width's bounds (equal:
+    held there), and with a spread its bound (+-; 0: held). first: (distances (S, N), their
+    derivatives (S, N, 3)) at the starts, when the caller has them (_distances with jacobian).
+    Gauss-Newton."""
     lanes = lanes.astype(float).copy()
+    n = lanes.shape[1]
     pull, target = (np.asarray(v, float) for v in priors)
     pull = pull + 1e-9
     if limits[0] == limits[1]:
         pull[3] = 1e12  # no step in the width
-    jac = np.empty(sides.shape + (4,))
+    jac = np.empty(sides.shape + (n,))
     jac[..., 3] = -sides / 2  # the width's column: the same every step
-    pulled = np.diag(pull)
-    low = np.array([-HEADING_LIMIT, -CURVATURE_LIMIT, limits[0]])  # psi, k, width
-    high = np.array([HEADING_LIMIT, CURVATURE_LIMIT, limits[1]])
+    low = [-HEADING_LIMIT, -CURVATURE_LIMIT, limits[0]]  # psi, k, width (, spread)
+    high = [HEADING_LIMIT, CURVATURE_LIMIT, limits[1]]
+    pull = np.repeat(pull[None, :], len(lanes), axis=0)
+    if n == 5:
+        jac[..., 4] = -sides * x / 2  # and the spread's
+        if not limits[2]:
+            pull[:, 4] = 1e12  # no step in the spread
+        low.append(-limits[2])
+        high.append(limits[2])
+    low, high = np.array(low), np.array(high)
+    pulled = pull[:, :, None] * np.eye(n)
     for i in range(iterations):
         if i == 0 and first is not None:
             d, jac[..., :3] = first[0], first[1]
         else:
             d, _ = _distances(x, y, lanes, jacobian=True, out=jac[..., :3])
-        wj = np.swapaxes(jac * w[..., None], 1, 2)  # (S, 4, N)
+        wj = np.swapaxes(jac * w[..., None], 1, 2)  # (S, n, N)
         a = wj @ jac + pulled
-        b = (wj @ (d - sides * lanes[:, 3:4] / 2)[..., None])[..., 0] + pull * (lanes - target)
+        b = (wj @ (d - sides * _halves(lanes, x))[..., None])[..., 0] + pull * (lanes - target)
         lanes -= np.linalg.solve(a, b[..., None])[..., 0]
         lanes[:, 1:] = np.minimum(np.maximum(lanes[:, 1:], low), high)  # np.clip's values
     return lanes
+
+
+def _halves(lanes, x):
+    """(S, N): half the width between the lines of each lane (S, 4 or 5) at points x (N,) ahead:
+    width / 2, or (width + spread x) / 2. A camera pitched a little off the mounting given
+    draws the floor wrongly by an amount that grows with the distance ahead: lines parallel on
+    the floor are drawn splayed (or closing), their spacing changing in proportion to it. The
+    spread is that change, per metre ahead, as this view shows the lane."""
+    return _spacing(lanes[:, 3:], x)
+
+
+def _spacing(own, x):
+    """_halves from the lanes' width (and spread) columns alone, own (S, 1 or 2)."""
+    half = own[:, :1] / 2
+    if own.shape[1] < 2:
+        return np.broadcast_to(half, (len(own), len(x)))
+    return half + own[:, 1:2] * x / 2
 
 
 class LaneFit:
@@ -207,9 +240,11 @@ class LaneFit:
     curvature changes, if it does: bend (s0 [m] along it, k2 [1/m] after), else None;
     predicted: whether it is the lane predicted, refitted (find_lane's prior)."""
 
-    def __init__(self, arc, sides, left, right, centre, width=None, bend=None, predicted=False):
+    def __init__(self, arc, sides, left, right, centre, width=None, bend=None, predicted=False,
+                 spread=0.0):
         self.e, self.psi, self.k = arc[:3]
         self.width, self.bend, self.predicted = width, bend, predicted
+        self.spread = spread  # the width's change per metre ahead, as the view shows it
         self.sides, self.left, self.right, self.centre = sides, left, right, centre
 
     @property
@@ -257,15 +292,15 @@ def _askew(lanes, pieces):
 
 def _sides(distance, allowed, half, tol, regions=None, askew=None):
     """(S, pieces) each piece's side in each lane: the allowed side (allowed: (pieces, 2)
-    left, right) whose line, half (S,) from the centre, its points lie nearest on average,
-    within tol; 0 for neither, and 0 where `askew` (S, pieces) says the piece runs across
-    the lines rather than along them (_askew). regions: (weights (pieces,), one-hot
+    left, right) whose line, half (S,) or (S, pieces) from the centre, its points lie nearest
+    on average, within tol; 0 for neither, and 0 where `askew` (S, pieces) says the piece runs
+    across the lines rather than along them (_askew). regions: (weights (pieces,), one-hot
     (pieces, R)) of the mask regions the pieces were cut from: one region is one tape, so one
     line; where a lane puts pieces of one region on both its lines (a tape bending across the
     view, partly lost in a shadow, taken for both), the pieces on the side with less of it
     are not the lane's."""
     d = distance.reshape(len(distance), len(allowed), POINTS).mean(axis=2)
-    half = half[:, None]
+    half = half[:, None] if half.ndim == 1 else half
     left = np.where(allowed[:, 0], np.abs(d - half), np.inf)
     right = np.where(allowed[:, 1], np.abs(d + half), np.inf)
     sides = np.where((left <= right) & (left < tol), 1, np.where(right < tol, -1, 0))
@@ -293,7 +328,7 @@ def _regions(pieces):
 
 
 def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tolerance=0.3,
-              anchor=None, prior_first=False, width=None):
+              anchor=None, prior_first=False, width=None, spread_limit=0.0):
     """The best-supported lane (LaneFit) among the pieces, or None. prior: (e, psi, k) of the
     lane expected from earlier frames; when it, refitted, explains `explained` of the line in
     view with the robot inside it, it is the lane (LaneFit.predicted), whatever else the search
@@ -305,7 +340,10 @@ def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tole
     of lane_width (a camera's pitch a little off, a track taped a little wider, make the lines
     look that much further apart: forced to the profile's width the lane would tilt to fit
     them); with one line in view it stays `width`, the width last measured (default
-    lane_width; held within the same bounds)."""
+    lane_width; held within the same bounds). spread_limit: how much the width may change per
+    metre ahead (_halves; 0: the lines are parallel), pulled a little towards none (with one
+    line in view it shares that line's slope with the lane's heading, which the anchor holds:
+    a single line's turn is taken in part as a splay)."""
     if not pieces:
         return None
     limits = (lane_width * (1 - width_tolerance), lane_width * (1 + width_tolerance))
@@ -322,6 +360,12 @@ def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tole
     # a level camera fits an arc turned the wrong way), which the expected lane steadies
     weights = [0.0, 0.0, 0.002 * total * lane_width ** 4, 0.02 * total]
     target = [0.0, 0.0, 0.0, width]
+    if spread_limit:  # the spread towards none as the width towards `width`, two lane
+        # widths ahead (where a change of spread moves a line as far as one of width there)
+        limits += (spread_limit,)
+        weights.append(0.02 * total * lane_width ** 2)
+        target.append(0.0)
+    own = (width, 0.0) if spread_limit else (width,)  # a seed's own width (and spread)
     anchor = anchor if anchor is not None else None if prior is None else prior[:2]
     if anchor is not None:
         weights[:2] = PRIOR_PULL * total, PRIOR_PULL * total * lane_width ** 2
@@ -339,38 +383,39 @@ def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tole
                     and support >= explained * total)
 
     if prior is not None and prior_first:
-        found = _fit_seeds(np.array([[*prior, width]], float), *search)[1]
+        found = _fit_seeds(np.array([[*prior, *own]], float), *search)[1]
         if holds(found):
             return _lane(pieces, found, points, priors, limits, lane_width, predicted=True)
-    seeds = [] if prior is None else [(*prior, width)]
+    seeds = [] if prior is None else [(*prior, *own)]
     for piece, (may_left, may_right) in zip(pieces, allowed):
         x0, y0 = piece.summary[0][1], piece.summary[1][1]
         for side in [s for s, may in ((1, may_left), (-1, may_right)) if may]:
-            seeds += _seeds_along(x0, y0, piece.phi, side * half, lane_width, width)
+            seeds += _seeds_along(x0, y0, piece.phi, side * half, lane_width, own)
     found, first = _fit_seeds(np.array(seeds, float), *search)
     if prior is not None and holds(first):
         return _lane(pieces, first, points, priors, limits, lane_width, predicted=True)
     return None if found is None else _lane(pieces, found, points, priors, limits, lane_width)
 
 
-def _seeds_along(x0, y0, phi, side, lane_width, width):
-    """Seeds (e, psi, k, width) of lanes, one per SEED_CURVATURES, whose line `side` [m] to
-    the left of the centre runs through (x0, y0) in the direction phi: the centre arc through
-    the point abreast of it, heading phi there, traced back to the robot's sideways axis (a
-    bending lane's heading at the robot is not the piece's: a bend's outer line seen across the
-    view, seeded turned as the piece and then bent, began a quarter turn from the lane). A
-    circle that never reaches the axis seeds nothing."""
+def _seeds_along(x0, y0, phi, side, lane_width, own):
+    """Seeds (e, psi, k, *own: the width, and the spread where it is fitted) of lanes, one
+    per SEED_CURVATURES, whose line `side` [m] to the left of the centre runs through (x0, y0)
+    in the direction phi: the centre arc through the point abreast of it, heading phi there,
+    traced back to the robot's sideways axis (a bending lane's heading at the robot is not the
+    piece's: a bend's outer line seen across the view, seeded turned as the piece and then
+    bent, began a quarter turn from the lane). A circle that never reaches the axis seeds
+    nothing."""
     s, c = math.sin(phi), math.cos(phi)
     xc, yc = x0 + side * s, y0 - side * c
     seeds = []
     for k in (q / lane_width for q in SEED_CURVATURES):
         if k == 0.0:
-            seeds.append((yc - math.tan(phi) * xc, phi, 0.0, width))
+            seeds.append((yc - math.tan(phi) * xc, phi, 0.0, *own))
             continue
         a = s - k * xc
         if abs(a) < 1.0:
             psi = math.asin(a)
-            seeds.append((yc + (c - math.cos(psi)) / k, psi, k, width))
+            seeds.append((yc + (c - math.cos(psi)) / k, psi, k, *own))
     return seeds
 
 
@@ -382,28 +427,29 @@ def _fit_seeds(seeds, pieces, points, allowed, lane_width, priors, limits, regio
     the first grows as it would alone: find_lane's prior, refitted, without a fit of its own
     (two fits cost as much as one search: the time is the calls, not the seeds)."""
     x, y, w = points
+    ahead = x.reshape(-1, POINTS).mean(axis=1)  # each piece's distance ahead
     lanes = seeds
     for tol in TOLERANCES:
         # the distances with their derivatives: the sides need the one, the fit's first step
         # both (the same distances, made once)
         slopes = np.empty((len(lanes), len(x), 3))
         distance, _ = _distances(x, y, lanes, jacobian=True, out=slopes)
-        sides = _sides(distance, allowed, lanes[:, 3] / 2, tol * lane_width, regions)
+        sides = _sides(distance, allowed, _halves(lanes, ahead), tol * lane_width, regions)
         on = np.repeat(sides, POINTS, axis=1)
         lanes = fit_lanes(x, y, on, (on != 0) * w, lanes, priors, limits,
                           first=(distance, slopes))
         # seeds from pieces of one line mostly grow into one lane: fit it once
-        grid = np.round(lanes / (0.02 * lane_width, 0.02, 0.1 / lane_width, 0.02 * lane_width))
+        grid = np.round(lanes / (0.02 * lane_width, 0.02, 0.1 / lane_width, 0.02 * lane_width,
+                                 0.02)[:lanes.shape[1]])
         lanes = lanes[_firsts(grid)]
     distance = _distances(x, y, lanes)[0]
-    half = lanes[:, 3] / 2
-    sides = _sides(distance, allowed, half, TOLERANCES[-1] * lane_width, regions,
+    half, halves = lanes[:, 3] / 2, _halves(lanes, ahead)  # at the robot; at each piece
+    sides = _sides(distance, allowed, halves, TOLERANCES[-1] * lane_width, regions,
                    _askew(lanes, pieces))
     on = np.repeat(sides, POINTS, axis=1)
     left, right = ((on == 1) * w).sum(axis=1), ((on == -1) * w).sum(axis=1)
     # line in the middle half of the lane, where only floor should be
-    middle = (np.abs(distance.reshape(len(lanes), -1, POINTS).mean(axis=2)) <
-              half[:, None] / 2)
+    middle = np.abs(distance.reshape(len(lanes), -1, POINTS).mean(axis=2)) < halves / 2
     inside = (np.repeat(middle & (sides == 0), POINTS, axis=1) * w).sum(axis=1)
     # the robot outside the lane it names
     outside = np.maximum(0.0, np.abs(robot_offset(*lanes[:, :3].T)) - half)
@@ -421,7 +467,8 @@ def _fit_seeds(seeds, pieces, points, allowed, lane_width, priors, limits, regio
     # (visual_control_test.png) a straight lane and one turned 44 degrees bending back 2.9 /m
     # scored alike, and the order of the pieces chose between them
     tied = np.flatnonzero(score >= score.max() - TIE * max(score.max(), 0.0))
-    miss = ((distance[tied] - on[tied] * half[tied, None]) ** 2 * (on[tied] != 0) * w).sum(axis=1)
+    miss = ((distance[tied] - on[tied] * _halves(lanes[tied], x)) ** 2 * (on[tied] != 0) *
+            w).sum(axis=1)
     best = int(tied[np.argmin(miss)])
     return tuple((score[i], lanes[i], sides[i], float(left[i] + right[i])) if score[i] > 0
                  else None for i in (best, 0))
@@ -447,8 +494,8 @@ def _lane(pieces, found, points, priors, limits, lane_width, predicted=False):
         lane, bend = bend
     lengths = [sum(p.length for p, s in zip(pieces, sides) if s == side) for side in (1, -1)]
     return LaneFit(lane, sides, lengths[0], lengths[1],
-                   _centre_points(pieces, sides, lane[:3], lane[3] / 2, bend), float(lane[3]),
-                   bend, predicted)
+                   _centre_points(pieces, sides, lane, bend), float(lane[3]), bend, predicted,
+                   float(lane[4]) if len(lane) > 4 else 0.0)
 
 
 def _fit_bend(points, on, lane, lane_width, priors, limits):
@@ -473,32 +520,37 @@ def _fit_bend(points, on, lane, lane_width, priors, limits):
     x, y, on, w = x[own], y[own], on[own], w[own]
     pull, target = (np.insert(np.asarray(v, float), 3, (0.0, 0.0)) for v in priors)
     pull += 1e-9
+    n = len(pull)  # e, psi, k, k2, s0, width (, spread)
     if limits[0] == limits[1]:
         pull[5] = 1e12  # no step in the width
+    if n == 7 and not limits[2]:
+        pull[6] = 1e12  # nor in the spread
     steps = np.array((1e-6, 1e-6, 1e-4, 1e-4, 1e-5))
 
     def costs(qs):  # (S,) costs and (S, N) residuals of S parameter sets
-        r = _bent_distances(x, y, qs[:, :5]) - on * qs[:, 5:6] / 2
+        r = _bent_distances(x, y, qs[:, :5]) - on * _spacing(qs[:, 5:], x)
         return r ** 2 @ w + (qs - target) ** 2 @ pull, r
 
-    one = float(w @ (_distances(x, y, lane[None, :])[0][0] - on * lane[3] / 2) ** 2)
+    halves = _halves(np.asarray(lane, float)[None, :], x)[0]
+    one = float(w @ (_distances(x, y, lane[None, :])[0][0] - on * halves) ** 2)
     if one <= w.sum() * (BEND_FLOOR * lane_width) ** 2:
         return None  # the one arc fits: nothing to gain
-    e, psi, k, width = lane
+    e, psi, k = lane[:3]
+    own = list(lane[3:])  # the width (and spread)
     starts = []
     for s0 in x.min() + np.array(BEND_STARTS) * np.ptp(x):
-        starts.append([e, psi, k, k, s0, width])
+        starts.append([e, psi, k, k, s0, *own])
         near, far = x < s0, x >= s0
         if np.count_nonzero(near) >= 2 * POINTS:  # before s0 a line or a parabola, after
-            a, slope, k1 = _parabola(x[near], (y - on * width / 2)[near], w[near])
-            k2 = _parabola(x[far], (y - on * width / 2)[far], w[far])[2] if (
+            a, slope, k1 = _parabola(x[near], (y - on * halves)[near], w[near])
+            k2 = _parabola(x[far], (y - on * halves)[far], w[far])[2] if (
                 np.count_nonzero(far) >= 3 * POINTS) else k
-            starts.append([a, math.atan(slope), k1, k2, s0, width])
-    moves = np.zeros((6, 6))
+            starts.append([a, math.atan(slope), k1, k2, s0, *own])
+    moves = np.zeros((6, n))
     moves[1:, :5] = np.diag(steps)
 
     def evaluated(qs):  # costs(qs), and the residuals' derivatives (S, N, 5) by differences
-        cost, res = costs((qs[:, None, :] + moves).reshape(-1, 6))  # each and its 5 steps
+        cost, res = costs((qs[:, None, :] + moves).reshape(-1, n))  # each and its 5 steps
         res = res.reshape(len(qs), 6, -1)
         slopes = (res[:, 1:] - res[:, :1]) / steps[:, None]
         return cost[::6], res[:, 0], slopes.transpose(0, 2, 1)
@@ -506,17 +558,23 @@ def _fit_bend(points, on, lane, lane_width, priors, limits):
     # every start at once: each its own Levenberg-Marquardt, in one array; a trial is
     # evaluated with its steps, so that where it is kept its derivatives are at hand
     q = np.array(starts, float)
-    jac = np.empty((len(q), len(x), 6))
+    jac = np.empty((len(q), len(x), n))
     jac[:, :, 5] = -on / 2
+    if n == 7:
+        jac[:, :, 6] = -on * x / 2
     c, r, jac[:, :, :5] = evaluated(q)
     damping = np.full(len(q), 1e-3)
     pulled = np.diag(pull)
-    low = np.array([-HEADING_LIMIT, -CURVATURE_LIMIT, -CURVATURE_LIMIT, x.min(), limits[0]])
-    high = np.array([HEADING_LIMIT, CURVATURE_LIMIT, CURVATURE_LIMIT, x.max(), limits[1]])
+    low = [-HEADING_LIMIT, -CURVATURE_LIMIT, -CURVATURE_LIMIT, x.min(), limits[0]]
+    high = [HEADING_LIMIT, CURVATURE_LIMIT, CURVATURE_LIMIT, x.max(), limits[1]]
+    if n == 7:
+        low.append(-limits[2])
+        high.append(limits[2])
+    low, high = np.array(low), np.array(high)
     for _ in range(3 * ITERATIONS):
         wj = jac.transpose(0, 2, 1) * w
         normal = wj @ jac + pulled
-        scaled = normal + damping[:, None, None] * (normal * np.eye(6))
+        scaled = normal + damping[:, None, None] * (normal * np.eye(n))
         gradient = (wj @ r[..., None])[..., 0] + pull * (q - target)
         trial = q - np.linalg.solve(scaled, gradient[..., None])[..., 0]
         trial[:, 1:] = np.minimum(np.maximum(trial[:, 1:], low), high)  # np.clip's values
@@ -528,7 +586,7 @@ def _fit_bend(points, on, lane, lane_width, priors, limits):
     best = int(np.argmin(c))  # the best start's fit (the first of equals, as before)
     q, c_best = q[best], float(r[best] ** 2 @ w)
     x, y, on = full
-    r = bent_distance(x, y, q[:3], (q[4], q[3])) - on * q[5] / 2
+    r = bent_distance(x, y, q[:3], (q[4], q[3])) - on * _spacing(q[None, 5:], x)[0]
     off = np.abs(r.reshape(-1, POINTS).mean(axis=1))[on[::POINTS] != 0]
     if (c_best > BEND_GAIN * one or abs(q[3] - q[2]) * lane_width < BEND_MIN or
             abs(q[3]) * q[5] / 2 >= 1 or  # the inner line would turn back on itself
@@ -560,10 +618,11 @@ def _left_normals(x, y, x0, y0, h0, k):
     return math.copysign(1.0, k) * dx / r, math.copysign(1.0, k) * dy / r
 
 
-def _centre_points(pieces, sides, arc, half, bend=None):
-    """The lane's pieces moved half a lane width towards the centre line, across it."""
+def _centre_points(pieces, sides, lane, bend=None):
+    """The lane's pieces moved half a lane width (where they lie: _halves) towards the centre
+    line, across it."""
     xs, ys, ws = [], [], []
-    e, psi, k = arc
+    e, psi, k = arc = lane[:3]
     if bend is not None:
         (x0,), (y0,), (h0,) = centre_path(arc, [bend[0]])
     for piece, side in zip(pieces, sides):
@@ -574,6 +633,7 @@ def _centre_points(pieces, sides, arc, half, bend=None):
             later = _along(piece.x, piece.y, e, psi, k) > bend[0]
             nx2, ny2 = _left_normals(piece.x, piece.y, x0, y0, h0, bend[1])
             nx, ny = np.where(later, nx2, nx), np.where(later, ny2, ny)
+        half = _halves(np.asarray(lane, float)[None, :], piece.x)[0]
         xs.append(piece.x - side * half * nx)
         ys.append(piece.y - side * half * ny)
         ws.append(piece.w)

@@ -19,8 +19,8 @@ import cv2
 import numpy as np
 
 from lanelib.camera import LECTURE_CAMERA, undistortion_maps
-from lanelib.colour import ELONGATION, colour_masks, floor_boxes, tape_pieces, view_sides
-from lanelib.geometry import floor_to_row
+from lanelib.colour import ELONGATION, Piece, colour_masks, floor_boxes, tape_pieces, view_sides
+from lanelib.geometry import floor_to_row, repitched
 from lanelib.stages import Detection, as_bgr, slope_sum
 
 
@@ -111,3 +111,20 @@ def perceive(frame, view, profile, p, piece_length, keep_stages=False, mark=None
     detection.pieces, detection.masks = pieces[:p.max_pieces], (masks, first)
     mark('pieces')
     return detection
+
+
+def repitched_pieces(pieces, mounting, turn_deg):
+    """The pieces (found with `mounting`) where they lie if the camera looks `turn_deg` further
+    down than the mounting says (geometry.repitched): their points, direction and length."""
+    out = []
+    for piece in pieces:
+        x, y = repitched(piece.x, piece.y, mounting, turn_deg)
+        # its direction and length: those of a 2 cm stretch along it through its middle, moved
+        c, s = math.cos(piece.phi), math.sin(piece.phi)
+        mx, my = piece.summary[0].mean(), piece.summary[1].mean()
+        ex, ey = repitched(np.array([mx - 0.01 * c, mx + 0.01 * c]),
+                           np.array([my - 0.01 * s, my + 0.01 * s]), mounting, turn_deg)
+        dx, dy = ex[1] - ex[0], ey[1] - ey[0]
+        out.append(Piece(x, y, math.atan2(dy, dx), piece.colour,
+                         piece.length * math.hypot(dx, dy) / 0.02, piece.width, piece.region))
+    return out

@@ -136,7 +136,7 @@ def test_a_seed_runs_along_its_piece_where_the_piece_lies(side):
     x, y, h = centre_path(arc, [0.3])
     assert math.degrees(abs(h[0] - arc[1])) == pytest.approx(72, abs=1)
     x0, y0 = x[0] - side * half * math.sin(h[0]), y[0] + side * half * math.cos(h[0])
-    seeds = lanefit._seeds_along(x0, y0, h[0], side * half, DT.lane_width, DT.lane_width)
+    seeds = lanefit._seeds_along(x0, y0, h[0], side * half, DT.lane_width, (DT.lane_width,))
     bent = [q for q in seeds if q[2] == pytest.approx(k)]
     assert len(bent) == 1 and bent[0][:2] == pytest.approx(arc[:2], abs=1e-9)
     e, psi, _, _ = [q for q in seeds if q[2] == 0.0][0]
@@ -208,6 +208,58 @@ def test_latency_steers_on_the_lane_where_it_will_be_when_the_command_acts():
     memory, pose = remembering.memory, remembering.memory.pose.copy()
     remembering.command()
     assert remembering.memory is memory and np.array_equal(memory.pose, pose)
+
+
+def seen_through(pieces, matrix, camera, given):
+    """The pieces as the controller finds them when the camera is mounted as `camera` but it
+    is told `given`: each point to its pixel, and that pixel back to the floor."""
+    from lanelib.geometry import floor_to_pixels, pixels_to_floor
+
+    out = []
+    for p in pieces:
+        u, v, _ = floor_to_pixels(p.x, p.y, matrix, camera)
+        x, y, _ = pixels_to_floor(np.stack([u, v], axis=-1), matrix, given)
+        out.append(Piece(x, y, math.atan2(y[-1] - y[0], x[-1] - x[0]), p.colour,
+                         float(np.hypot(np.diff(x), np.diff(y)).sum()), p.width))
+    return out
+
+
+def test_a_camera_pitched_off_its_mounting_is_corrected_from_the_splay_of_the_lines():
+    """A camera looking 3 degrees further down than its mounting says draws the floor
+    stretched, the lines splayed: with pitch_tolerance the controller learns the pitch from
+    the splay, frame after frame, and then places the lane, from one line too, where it is;
+    without, the lane is fitted turned and bending, and one line alone tilted."""
+    from lanelib.geometry import Mounting
+
+    w = DT.lane_width
+    given = Mounting(0.108, 19.15, 0.066)
+    camera = Mounting(0.108, 22.15, 0.066)
+    matrix = np.array([[320.0, 0, 320], [0, 320.0, 240], [0, 0, 1]])
+    left = line_pieces(0.01 + w / 2, 'yellow', along=(0.15, 0.7), dashed=True)
+    right = line_pieces(0.01 - w / 2, 'white', along=(0.15, 0.7))
+    both = frame(seen_through(left + right, matrix, camera, given))
+    alone = frame(seen_through(right, matrix, camera, given))
+    mounted = dict(lane='duckietown', memory=0.0, camera_height=0.108, camera_pitch=19.15,
+                   camera_forward=0.066, one_line_width='measured', smoothing=1.0)
+    estimates = {}
+    for tolerance in (0.0, 4.0):
+        ctl = ImprovedController(LaneParams(), ImprovedParams(**mounted,
+                                                              pitch_tolerance=tolerance))
+        for _ in range(25):
+            ctl(both, None)
+            ctl.sent(SimpleNamespace(linear_x=0.0, angular_z=0.0))  # standing still
+        learned, two = ctl.pitch_error, ctl.estimate
+        ctl(alone, None)
+        estimates[tolerance] = (learned, two, ctl.estimate, ctl.extra()['pitch_error_deg'])
+        assert ctl.mounting.pitch_deg == pytest.approx(19.15 + learned)  # the lane drawn so
+    learned, two, one, recorded = estimates[4.0]
+    assert learned == pytest.approx(3.0, abs=0.3) and recorded == round(learned, 2)
+    for e in (two, one):
+        assert e.offset == pytest.approx(-0.01, abs=0.002) and abs(math.degrees(e.heading)) < 0.3
+    learned, two, one, recorded = estimates[0.0]
+    assert learned == 0.0 and recorded == 0.0
+    # the splay fitted as a lane turned and bending (-3.4 degrees), and one line's as a tilt
+    assert abs(math.degrees(two.heading)) > 2.0 and abs(math.degrees(one.heading)) > 1.0
 
 
 def test_follows_compares_the_headings_at_the_robot():

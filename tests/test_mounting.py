@@ -14,7 +14,7 @@ import simulate
 from calibration import main as calibration_main
 from kobuki_lane import main as node_main
 from lanelib.camera import DUCKIEBOT_CAMERA, LECTURE_CAMERA
-from lanelib.geometry import Mounting, floor_to_pixels, pixels_to_floor
+from lanelib.geometry import Mounting, floor_to_pixels, pixels_to_floor, repitched
 from lanelib.mounting import MountingError, read_mounting, solve_mounting
 from lanelib.sim.world import chessboard_view
 
@@ -69,6 +69,21 @@ def wide_board(tmp_path_factory):
                              '--board-ahead', '0.2', '--calibration', 'duckiebot', '-o',
                              str(yaml)]) == 0
     return picture, yaml
+
+
+@pytest.mark.parametrize('turn', [-4.0, 2.5])
+def test_repitched_moves_floor_points_to_where_a_camera_pitched_further_sees_them(turn):
+    # floor points seen by a camera pitched 19.15 + turn degrees, found with a mounting that
+    # says 19.15: repitched puts them back where they are
+    given = Mounting(0.108, 19.15, 0.066)
+    camera = Mounting(0.108, 19.15 + turn, 0.066)
+    matrix = np.array([[300.0, 0, 320], [0, 300.0, 240], [0, 0, 1]])
+    x, y = np.array([0.12, 0.3, 0.55, 0.8]), np.array([0.1, -0.12, 0.05, 0.2])
+    u, v, ok = floor_to_pixels(x, y, matrix, camera)
+    found = pixels_to_floor(np.stack([u, v], axis=-1), matrix, given)
+    assert ok.all() and np.abs(found[0] - x).max() > 0.03  # found elsewhere
+    back = repitched(found[0], found[1], given, turn)
+    assert np.allclose(back[0], x, atol=1e-9) and np.allclose(back[1], y, atol=1e-9)
 
 
 def test_the_tool_writes_the_mounting_the_node_reads(wide_board):
