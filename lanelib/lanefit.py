@@ -194,15 +194,14 @@ def fit_lanes(x, y, sides, w, lanes, priors, limits, iterations=ITERATIONS, firs
     jac[..., 3] = -sides / 2  # the width's column: the same every step
     low = [-HEADING_LIMIT, -CURVATURE_LIMIT, limits[0]]  # psi, k, width (, spread)
     high = [HEADING_LIMIT, CURVATURE_LIMIT, limits[1]]
-    pull = np.repeat(pull[None, :], len(lanes), axis=0)
     if n == 5:
         jac[..., 4] = -sides * x / 2  # and the spread's
         if not limits[2]:
-            pull[:, 4] = 1e12  # no step in the spread
+            pull[4] = 1e12  # no step in the spread
         low.append(-limits[2])
         high.append(limits[2])
     low, high = np.array(low), np.array(high)
-    pulled = pull[:, :, None] * np.eye(n)
+    pulled = np.diag(pull)
     for i in range(iterations):
         if i == 0 and first is not None:
             d, jac[..., :3] = first[0], first[1]

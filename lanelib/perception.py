@@ -115,16 +115,22 @@ def perceive(frame, view, profile, p, piece_length, keep_stages=False, mark=None
 
 def repitched_pieces(pieces, mounting, turn_deg):
     """The pieces (found with `mounting`) where they lie if the camera looks `turn_deg` further
-    down than the mounting says (geometry.repitched): their points, direction and length."""
-    out = []
-    for piece in pieces:
-        x, y = repitched(piece.x, piece.y, mounting, turn_deg)
-        # its direction and length: those of a 2 cm stretch along it through its middle, moved
-        c, s = math.cos(piece.phi), math.sin(piece.phi)
-        mx, my = piece.summary[0].mean(), piece.summary[1].mean()
-        ex, ey = repitched(np.array([mx - 0.01 * c, mx + 0.01 * c]),
-                           np.array([my - 0.01 * s, my + 0.01 * s]), mounting, turn_deg)
-        dx, dy = ex[1] - ex[0], ey[1] - ey[0]
-        out.append(Piece(x, y, math.atan2(dy, dx), piece.colour,
-                         piece.length * math.hypot(dx, dy) / 0.02, piece.width, piece.region))
-    return out
+    down than the mounting says (geometry.repitched): their points, direction and length. Every
+    point is moved in one call (a call per piece took as long as the moving)."""
+    if not pieces:
+        return []
+    # each piece's direction and length: those of a 2 cm stretch along it through its middle
+    c = np.array([math.cos(p.phi) for p in pieces])
+    s = np.array([math.sin(p.phi) for p in pieces])
+    mx = np.array([p.summary[0].mean() for p in pieces])
+    my = np.array([p.summary[1].mean() for p in pieces])
+    ends = np.cumsum([len(p.x) for p in pieces])
+    x, y = repitched(np.concatenate([p.x for p in pieces] + [mx - 0.01 * c, mx + 0.01 * c]),
+                     np.concatenate([p.y for p in pieces] + [my - 0.01 * s, my + 0.01 * s]),
+                     mounting, turn_deg)
+    first, last = slice(ends[-1], ends[-1] + len(pieces)), slice(ends[-1] + len(pieces), None)
+    dx, dy = x[last] - x[first], y[last] - y[first]
+    return [Piece(px, py, math.atan2(ddy, ddx), p.colour, p.length * math.hypot(ddx, ddy) / 0.02,
+                  p.width, p.region)
+            for p, px, py, ddx, ddy in zip(pieces, np.split(x[:ends[-1]], ends[:-1]),
+                                            np.split(y[:ends[-1]], ends[:-1]), dx, dy)]
