@@ -81,7 +81,8 @@ def half_curvature(k, b):
     return k * (1 + b * b) ** 1.5 / 2
 
 
-def measure(pieces, profile, p, prior=None, anchor=None, prior_first=False, width=None):
+def measure(pieces, profile, p, prior=None, anchor=None, prior_first=False, width=None,
+            expected=None):
     """One frame's LaneEstimate from pieces of line with their colours, or None (module doc);
     and the lanefit.LaneFit it rests on (or None). p: ImprovedParams in metres; prior: the
     arc (e, psi, k) of the lane expected; anchor: (offset, heading) of the lane expected at
@@ -94,7 +95,7 @@ def measure(pieces, profile, p, prior=None, anchor=None, prior_first=False, widt
     spread_limit = p.lane_width * math.tan(math.radians(p.pitch_tolerance)) / p.camera_height
     fit = find_lane(pieces, profile, p.lane_width, prior, width_tolerance=p.width_tolerance,
                     anchor=anchor, prior_first=prior_first, width=width,
-                    spread_limit=spread_limit)
+                    spread_limit=spread_limit, expected=expected)
     if fit is None or fit.left + fit.right < MIN_SEEN * p.lane_width or abs(fit.across) > fit.width:
         return None, fit
     b = math.tan(fit.psi)

@@ -16,13 +16,14 @@ for the lane: the lines are sorted to left and right against the lane expected (
 centre line, else the prediction), and the lane found is pulled towards where the memory has it
 at the robot (lines seen far ahead place it there only through a long lever); a lane found
 turned at the robot more than `turn_gate` from the prediction is not the lane (estimate.follows;
-off by default, the duckiebot preset's 0.5 rad), and the frame counts as one without it. While
-the lane is seen the robot steers at the remembered centre line `memory_lookahead` ahead (else
-at the estimate, as near as it is seen); not seen, it follows the lane remembered round any turn
-(an arc through the robot); lost for `lost_timeout`, it follows that while it lasts, then turns
-in place towards where the lane went, up to `search_angle`, then stops. A lane found after that
-must be the one lost: the robot has not left its lane, so it lies within 3/4 of a lane width of
-it.
+off by default, the duckiebot preset's 0.5 rad), and the frame counts as one without it; with
+`bend_belief`, the search weighs each lane by how far its curvature lies from the prediction's.
+While the lane is seen the robot steers at the remembered centre line `memory_lookahead` ahead
+(else at the estimate, as near as it is seen); not seen, it follows the lane remembered round
+any turn (an arc through the robot); lost for `lost_timeout`, it follows that while it lasts,
+then turns in place towards where the lane went, up to `search_angle`, then stops. A lane found
+after that must be the one lost: the robot has not left its lane, so it lies within 3/4 of a
+lane width of it.
 
 The robot's motion comes from odometry while it comes (topics.Odometry), else from the commands
 sent, for as long as they were sent. Distances and speeds are in lane widths
@@ -123,6 +124,11 @@ class ImprovedParams:
                                'lane predicted there is not taken, and the frame counts as one '
                                'without a lane (estimate.follows); 0: off', 'rad',
                                between(0, math.pi))
+    bend_belief: float = setting(0.0, 'with a lane predicted, each lane found is weighed by '
+                                 "how far its curvature lies from the prediction's, as a "
+                                 'normal distribution this wide: a lane bent the other way is '
+                                 'not taken for the longer line it rests on (lanefit.find_lane); '
+                                 '0: off', '1/lane width', between(0, 10))
     lost_timeout: float = setting(1.0, 'the lane unseen this long: lost (the robot follows the '
                                   'lane remembered while it lasts, then searches, then stops)',
                                   's', positive)
@@ -339,10 +345,12 @@ class ImprovedController:
         # off and the lines looking further apart, moved the lane sideways as a line left view)
         pieces = (repitched_pieces(detection.pieces, p.mounting, self.pitch_error)
                   if self.pitch_error else detection.pieces)
-        meas, fit = measure(pieces, self.profile, p, guide, anchor, self.held,
-                            self.width if p.one_line_width == 'measured' else None)
-        self.mark('lane')
         blind = self.lost_for > p.lost_timeout  # the estimate from before is stale
+        expected = ((prior.curvature, p.bend_belief / w) if p.bend_belief and
+                    prior is not None and not blind else None)
+        meas, fit = measure(pieces, self.profile, p, guide, anchor, self.held,
+                            self.width if p.one_line_width == 'measured' else None, expected)
+        self.mark('lane')
         if (meas is not None and prior is not None and not blind and
                 not follows(prior, meas, p.turn_gate)):
             meas, fit = None, None  # turned further than it can have turned since: not the lane

@@ -327,7 +327,7 @@ def _regions(pieces):
 
 
 def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tolerance=0.3,
-              anchor=None, prior_first=False, width=None, spread_limit=0.0):
+              anchor=None, prior_first=False, width=None, spread_limit=0.0, expected=None):
     """The best-supported lane (LaneFit) among the pieces, or None. prior: (e, psi, k) of the
     lane expected from earlier frames; when it, refitted, explains `explained` of the line in
     view with the robot inside it, it is the lane (LaneFit.predicted), whatever else the search
@@ -342,7 +342,9 @@ def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tole
     lane_width; held within the same bounds). spread_limit: how much the width may change per
     metre ahead (_halves; 0: the lines are parallel), pulled a little towards none (with one
     line in view it shares that line's slope with the lane's heading, which the anchor holds:
-    a single line's turn is taken in part as a splay)."""
+    a single line's turn is taken in part as a splay). expected: (k, spread) [1/m]: the
+    curvature the lane is predicted to have, and how far from it a lane may be bent: each
+    lane's support is weighed by that normal distribution."""
     if not pieces:
         return None
     limits = (lane_width * (1 - width_tolerance), lane_width * (1 + width_tolerance))
@@ -370,7 +372,8 @@ def find_lane(pieces, profile, lane_width, prior=None, explained=0.6, width_tole
         weights[:2] = PRIOR_PULL * total, PRIOR_PULL * total * lane_width ** 2
         target[:2] = anchor
     priors = (weights, target)
-    search = (pieces, points, allowed, lane_width, priors, limits, _regions(pieces), anchor)
+    search = (pieces, points, allowed, lane_width, priors, limits, _regions(pieces), anchor,
+              expected)
 
     def holds(found):  # the prior, refitted, is the lane: both its lines in view (one line
         # alone fits a lane on either side of it, and which one is the search's to say: the
@@ -419,7 +422,7 @@ def _seeds_along(x0, y0, phi, side, lane_width, own):
 
 
 def _fit_seeds(seeds, pieces, points, allowed, lane_width, priors, limits, regions=None,
-               anchor=None):
+               anchor=None, expected=None):
     """(score, lane, sides, support) of the best lane grown from the seeds (S, 4: e, psi, k,
     width), and of the lane grown from the first seed; each None where there is none. Each
     seed grows on its own (a seed whose lane another's joins is dropped, the first kept), so
@@ -459,6 +462,11 @@ def _fit_seeds(seeds, pieces, points, allowed, lane_width, priors, limits, regio
         # expected to be is the robot's (a tape bending across the view, taken for the other
         # line from one frame to the next, flipped the estimate by a lane width)
         score = score * np.exp(-0.5 * ((lanes[:, 0] - anchor[0]) / half) ** 2)
+    if expected is not None:
+        # the lane predicted: a lane bent much otherwise (at a tight corner, the far edge
+        # across the view with the nearest dashes of the centre line, turned away and bent the
+        # other way) is weighed down, however long the line it rests on
+        score = score * np.exp(-0.5 * ((lanes[:, 2] - expected[0]) / expected[1]) ** 2)
     score[~sides.any(axis=1)] = -1.0
     # of lanes that explain the same line equally (the same pieces: near the robot, a lane
     # turned at the robot and bending back runs along them as well as a straight one), the

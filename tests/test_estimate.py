@@ -180,6 +180,34 @@ def test_a_lane_turned_further_than_it_can_have_turned_is_no_lane_until_the_esti
     assert free.lost_for == 0.0 and free.estimate.heading > 0.3
 
 
+def test_with_bend_belief_the_search_weighs_lanes_by_the_curvature_predicted(monkeypatch):
+    """With bend_belief, each frame's search is given the curvature the lane is predicted to
+    have and the spread in 1/m (lanefit.find_lane's expected); without it, or with no
+    prediction, none."""
+    import lanelib.estimate as estimate
+    given = []
+    real = estimate.find_lane
+    monkeypatch.setattr(estimate, 'find_lane',
+                        lambda *a, **k: given.append(k['expected']) or real(*a, **k))
+    bend = [Piece(x, side * DT.lane_width / 2 - 2.0 * x * x / 2, 0.0, colour, 0.1, 0.03)
+            for side, colour in ((1, 'yellow'), (-1, 'white'))
+            for x in (np.linspace(s, s + 0.1, 20) for s in np.arange(0.15, 0.8, 0.1))]
+    robot = ImprovedController(LaneParams(), ImprovedParams(lane='duckietown', memory=0.0,
+                                                            bend_belief=0.5))
+    robot(frame(bend), 0.0)
+    v, omega = robot.last
+    predicted = predict(robot.estimate, v * 0.125, omega * 0.125).curvature
+    robot(frame(bend), 0.125)
+    assert given[0] is None
+    assert given[1] == pytest.approx((predicted, 0.5 / DT.lane_width), abs=1e-9)
+    assert predicted < -0.1  # bent right, as measured in the first frame
+    given.clear()
+    free = ImprovedController(LaneParams(), ImprovedParams(lane='duckietown', memory=0.0))
+    free(frame(bend), 0.0)
+    free(frame(bend), 0.125)
+    assert given == [None, None]
+
+
 def test_latency_steers_on_the_lane_where_it_will_be_when_the_command_acts():
     """With `latency`, the command is the one for the lane moved on by the last command for
     that long (predict), and the estimate kept is the one measured; 0 steers on it as it is."""

@@ -515,3 +515,48 @@ def test_a_line_bent_across_the_view_beyond_a_gap_is_not_the_other_line():
     assert list(fit.sides[:len(near)]) == [-1] * len(near)
     assert 1 not in fit.sides[len(near):]
     assert abs(fit.e) < 0.03 and fit.k > 0
+
+
+# a frame of gym-duckietown's small_loop (seed 2, domain rand) 0.4 s before a tight right
+# corner, as its pieces reach the fit (colour, phi, length, width, region, the summary's x and
+# y [m]): the yellow centre line sweeping across the view to the right (the white line on the
+# inside of the corner is out of view), and beyond it the far white edge across the view
+CORNER_PIECES = [
+    ('w', -1.5140, 0.1026, 0.0752, 1, (0.5252, 0.5273, 0.5289), (0.0865, 0.0521, 0.018)),
+    ('w', -1.5490, 0.1014, 0.0745, 1, (0.5322, 0.5343, 0.5337), (-0.0115, -0.0446, -0.0792)),
+    ('w', 1.5686, 0.0990, 0.0870, 1, (0.549, 0.5497, 0.5528), (-0.4653, -0.4326, -0.3988)),
+    ('w', -1.5313, 0.0978, 0.0803, 1, (0.5475, 0.5493, 0.5475), (-0.3013, -0.3333, -0.3671)),
+    ('w', 1.5517, 0.0980, 0.0919, 1, (0.5436, 0.545, 0.5466), (-0.2716, -0.2389, -0.2064)),
+    ('w', -1.0207, 0.1031, 0.0681, 1, (0.4407, 0.4602, 0.475), (0.2943, 0.2672, 0.2353)),
+    ('w', -1.5345, 0.0963, 0.0764, 1, (0.5414, 0.5414, 0.5426), (-0.1122, -0.1448, -0.1765)),
+    ('w', -1.4309, 0.1018, 0.0547, 1, (0.4858, 0.4882, 0.4952), (0.2068, 0.1812, 0.1423)),
+    ('w', -1.4190, 0.0927, 0.0505, 1, (0.5108, 0.5161, 0.5198), (0.171, 0.135, 0.1117)),
+    ('w', -0.6851, 0.0795, 0.0603, 1, (0.3765, 0.3964, 0.4163), (0.3378, 0.3244, 0.3033)),
+    ('w', 0.7093, 0.0568, 0.0534, 1, (0.5402, 0.5495, 0.5664), (-0.5125, -0.4965, -0.4837)),
+    ('y', -0.6246, 0.0593, 0.0267, 8, (0.2318, 0.2463, 0.2634), (0.1258, 0.1158, 0.1025)),
+    ('y', -1.2749, 0.0523, 0.0290, 7, (0.2872, 0.2918, 0.2968), (0.0686, 0.0522, 0.0353)),
+    ('y', -1.4174, 0.0487, 0.0306, 5, (0.314, 0.3164, 0.3184), (-0.05, -0.0659, -0.0822)),
+    ('y', -1.4355, 0.0390, 0.0309, 3, (0.3285, 0.3291, 0.3301), (-0.25, -0.2634, -0.2762)),
+    ('y', -1.4950, 0.0381, 0.0325, 1, (0.3251, 0.325, 0.3258), (-0.137, -0.1498, -0.1625)),
+    ('y', -1.4659, 0.0377, 0.0327, 2, (0.3274, 0.3275, 0.3279), (-0.1911, -0.2037, -0.2163)),
+    ('y', -1.4190, 0.0350, 0.0302, 6, (0.3062, 0.3076, 0.3098), (0.0018, -0.01, -0.0212)),
+]
+
+
+def test_a_lane_bent_the_other_way_from_the_one_expected_is_weighed_down():
+    """The lane expected bends right (-3.2 /m): the yellow line ahead bends right with it. The
+    far white edge across the view, with the two nearest dashes, makes a lane turned 47
+    degrees that bends left, and its long line outscores the yellow alone; weighed by how far
+    its curvature lies from the one expected (within 1 / lane width: bend_belief 1), it does not."""
+    names = {'w': 'white', 'y': 'yellow'}
+    pieces = [Piece(np.array(x), np.array(y), phi, names[c], length, width, (names[c], region))
+              for c, phi, length, width, region, x, y in CORNER_PIECES]
+    prior = (0.0602, -0.3651, -3.189)  # e [m], psi [rad], k [1/m] of the lane expected
+    settings = dict(anchor=(-0.0239, -0.6047), width=0.2434, spread_limit=0.1538)
+    free = find_lane(pieces, DT, DT.lane_width, prior, **settings)
+    assert free.k > 4.0 and free.psi < math.radians(-45)  # turned away, bent back: not it
+    held = find_lane(pieces, DT, DT.lane_width, prior, expected=(prior[2], 1 / DT.lane_width),
+                     **settings)
+    assert held.k == pytest.approx(-3.4, abs=0.3) and math.radians(-35) < held.psi < 0
+    assert set(held.sides[[c == 'y' for c, *_ in CORNER_PIECES]]) == {1}
+    assert not held.sides[[c == 'w' for c, *_ in CORNER_PIECES]].any()
