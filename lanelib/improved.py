@@ -346,13 +346,12 @@ class ImprovedController:
         pieces = (repitched_pieces(detection.pieces, p.mounting, self.pitch_error)
                   if self.pitch_error else detection.pieces)
         blind = self.lost_for > p.lost_timeout  # the estimate from before is stale
-        expected = ((prior.curvature, p.bend_belief / w) if p.bend_belief and
-                    prior is not None and not blind else None)
+        current = prior is not None and not blind  # the prediction stands for this frame
+        expected = (prior.curvature, p.bend_belief / w) if p.bend_belief and current else None
         meas, fit = measure(pieces, self.profile, p, guide, anchor, self.held,
                             self.width if p.one_line_width == 'measured' else None, expected)
         self.mark('lane')
-        if (meas is not None and prior is not None and not blind and
-                not follows(prior, meas, p.turn_gate)):
+        if meas is not None and current and not follows(prior, meas, p.turn_gate):
             meas, fit = None, None  # turned further than it can have turned since: not the lane
         self.sides = None if fit is None else fit.sides
         self.held = fit is not None and fit.predicted
@@ -367,8 +366,8 @@ class ImprovedController:
                 if p.pitch_tolerance:
                     self.learn_pitch(meas)
             self.lost_for, self.search = 0.0, None
-            self.estimate = blend(prior, meas, p.smoothing * meas.confidence) if (
-                prior and not blind) else meas
+            self.estimate = (blend(prior, meas, p.smoothing * meas.confidence) if current
+                             else meas)
         else:
             self.lost_for += dt
             self.estimate = prior

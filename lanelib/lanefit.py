@@ -423,8 +423,9 @@ def _seeds_along(x0, y0, phi, side, lane_width, own):
 
 def _fit_seeds(seeds, pieces, points, allowed, lane_width, priors, limits, regions=None,
                anchor=None, expected=None):
-    """(score, lane, sides, support) of the best lane grown from the seeds (S, 4: e, psi, k,
-    width), and of the lane grown from the first seed; each None where there is none. Each
+    """(score, lane, sides, support) of the best lane grown from the seeds (S, 4 or 5: e, psi,
+    k, width (, spread)), and of the lane grown from the first seed; each None where there is
+    none; expected: find_lane's, each lane's score weighed by it. Each
     seed grows on its own (a seed whose lane another's joins is dropped, the first kept), so
     the first grows as it would alone: find_lane's prior, refitted, without a fit of its own
     (two fits cost as much as one search: the time is the calls, not the seeds)."""
