@@ -1,6 +1,7 @@
 """kobuki_lane.py from the command line: dry runs, sources, outputs, bad input."""
 
 import dataclasses
+import glob
 import os
 import shutil
 import signal
@@ -173,7 +174,7 @@ def test_outputs_in_a_read_only_folder_are_refused_before_the_run(flag):
         shutil.rmtree(folder)
 
 
-def tool_mains(labels_folder):
+def tool_mains(labels_folder, images_folder):
     """(name, main, argv before the output path) of every command line that writes a file."""
     import calibration
     import simulate
@@ -184,7 +185,7 @@ def tool_mains(labels_folder):
             ('simulate.py', simulate.main, ['--track', 'lecture', '--json']),
             ('evaluate_real.py', evaluate_real.main, [labels_folder, '--json']),
             ('calibration.py', calibration.main,
-             ['--images', os.path.join(SAMPLES, '*.jpg'), '-o'])]
+             ['--images', os.path.join(images_folder, '*.jpg'), '-o'])]
 
 
 @pytest.mark.parametrize('read_only', [False, True], ids=['missing folder', 'read-only folder'])
@@ -192,13 +193,19 @@ def test_every_tool_refuses_an_unwritable_output_before_its_run(read_only):
     import tempfile
 
     labels = tempfile.mkdtemp(prefix='kobuki_lane_labels_')
+    # the calibration's pictures where 'nobody' can read them (a checkout cloned into a private
+    # folder, as mktemp -d makes, is not)
+    images = tempfile.mkdtemp(prefix='kobuki_lane_images_')
     folder = tempfile.mkdtemp(prefix='kobuki_lane_ro_')
     try:
         os.chmod(labels, 0o755)
         open(os.path.join(labels, 'labels.csv'), 'w').close()
+        os.chmod(images, 0o755)
+        for picture in glob.glob(os.path.join(SAMPLES, '*.jpg')):
+            shutil.copy(picture, images)
         os.chmod(folder, 0o555)
         target = os.path.join(folder if read_only else os.path.join(folder, 'no'), 'out.json')
-        for name, tool, argv in tool_mains(labels):
+        for name, tool, argv in tool_mains(labels, images):
             status, output = run_as_nobody(tool, [*argv, target])
             assert status == 2, (name, output)
             assert ('not writable' if read_only else 'does not exist') in output, (name, output)
@@ -208,6 +215,7 @@ def test_every_tool_refuses_an_unwritable_output_before_its_run(read_only):
         os.chmod(folder, 0o755)
         shutil.rmtree(folder)
         shutil.rmtree(labels)
+        shutil.rmtree(images)
 
 
 def test_show_without_a_display_is_a_clear_error():
