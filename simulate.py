@@ -80,15 +80,16 @@ def controller_for(name, spec, params, mounting=None, odometry=None):
 
 def run(spec, controller='lecture', seed=0, video=None, plot=None, time_limit=None,
         keep_going=False, start_offset=0.0, start_yaw=0.0, limits=None,
-        controller_factory=controller_for, odometry=False):
+        controller_factory=controller_for, odometry=False, params=None):
     """One closed-loop run; returns the metrics dict. controller_factory(name, spec,
     params): the controller to drive with (controller_for: kobuki_lane's, told the track).
     odometry: the base publishes /odom through the stand-in and the improved controller's lane
-    memory follows it (factory called with odometry=topics.Odometry)."""
+    memory follows it (factory called with odometry=topics.Odometry). params: the lecture's
+    table (LaneParams; its rate is the loop's), default the lecture's defaults."""
     ros = StandInRospy(SimClock(), quiet=True)
     sim = TrackSimulator(spec, ros, seed, time_limit, keep_going, start_offset, start_yaw,
                          limits, odometry)
-    params = LaneParams()
+    params = params or LaneParams()
     topdown = TopDown(sim) if (video or plot) else None
     sink = SideBySide(video, params.rate, topdown) if video else None
     odom = Odometry(ros, ODOM_TOPIC, msg_type=OdometryMessage) if odometry else None

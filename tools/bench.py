@@ -48,13 +48,14 @@ import os
 import subprocess
 import sys
 import time
+from dataclasses import replace
 
 import cv2
 import numpy as np
 
 import kobuki_lane
 from kobuki_lane import LaneFollower, LaneParams, LectureRule, detect
-from lanelib.camera import LECTURE_CAMERA
+from lanelib.camera import CAMERAS, LECTURE_CAMERA
 from lanelib.cli import check_output
 from lanelib.fast import FastPipeline, Layout
 from lanelib.improved import ImprovedController, ImprovedParams
@@ -63,8 +64,8 @@ from lanelib.outputs import Outputs
 from lanelib.rospy_standin import SimClock, StandInRospy, Twist
 from lanelib.safety import SafeBase
 from lanelib.sim.simulator import VARIANTS, apply_variant
-from lanelib.sim.tracks import LANE_TRACKS, load_track
-from lanelib.sim.world import FloorCamera, FloorMap
+from lanelib.sim.tracks import LANE_TRACKS, load_track, with_world
+from lanelib.sim.world import WORLDS, FloorCamera, FloorMap
 from lanelib.sources import ListSource
 from lanelib.stages import Detection, slope_sum
 from tools.common import REPO, SAMPLES, machine, rss_mb, whole_number, write_json
@@ -72,6 +73,8 @@ from tools.common import REPO, SAMPLES, machine, rss_mb, whole_number, write_jso
 OUT = os.path.join('out', 'bench')
 STAGES = ('undistort', 'gray', 'blur', 'canny', 'roi', 'hough', 'slopes')
 IMPROVED_STAGES = ('undistort', 'colour', 'pieces', 'lane', 'steer')
+# the duckiebot preset's driving: Duckietown's lane on an S-bend and on corners of 0.5 m radius
+PRESET_TRACKS = ('s_bend', 'tight')
 
 
 # ---------------------------------------------------------------- the lecture, literally
@@ -414,22 +417,47 @@ def time_improved(frames, repeats, lane='lecture'):
     return result
 
 
-def time_improved_driving(tracks, seed=0):
+def preset_settings(robot, spec):
+    """(lecture table, improved controller's settings) as the node resolves `--robot ROBOT
+    --controller improved`, the camera's mounting the simulated one (as --mounting FILE tells
+    the node the robot's) and the lane width the track's."""
+    from lanelib.node import settings_from
+
+    args = kobuki_lane.build_parser().parse_args(['--robot', robot, '--controller', 'improved'])
+    params, _, _, improved, _ = settings_from(args, lambda name, default=None: default,
+                                              LaneParams)
+    m = spec.mounting
+    return params, replace(improved, camera_height=m.height, camera_pitch=m.pitch_deg,
+                           camera_forward=m.forward, camera_roll=m.roll_deg,
+                           lane_width=spec.track.lane_width)
+
+
+def time_improved_driving(tracks, seed=0, robot=None, world=None):
     """The improved controller per stage as a running node uses it: every frame of
-    simulate.py's closed-loop run of each track (the lecture's world, clean), in turn, with
-    the lane from the frames before."""
+    simulate.py's closed-loop run of each track (the lecture's world, clean, or `world`), in
+    turn, with the lane from the frames before; with `robot`, the preset's settings and rate
+    (preset_settings) instead of the simulator's defaults."""
     import simulate
 
     clock = StageClock(IMPROVED_STAGES, 'steer')
-
-    def timed(name, spec, params, **kwargs):
-        controller = simulate.controller_for(name, spec, params, **kwargs)
-        controller.mark = clock.mark
-        return controller
+    results = []
     for track in tracks:
-        simulate.run(load_track(track), 'improved', seed=seed, controller_factory=timed)
+        spec = load_track(track)
+        if world:
+            spec = with_world(spec, WORLDS[world])
+        params, improved = preset_settings(robot, spec) if robot else (None, None)
+
+        def timed(name, spec, params, improved=improved, **kwargs):
+            controller = (kobuki_lane.make_controller(name, params, CAMERAS[spec.camera],
+                                                      improved, **kwargs)
+                          if robot else simulate.controller_for(name, spec, params, **kwargs))
+            controller.mark = clock.mark
+            return controller
+        results.append(simulate.run(spec, 'improved', seed=seed, controller_factory=timed,
+                                    params=params))
     result = {stage: stats(t) for stage, t in clock.times.items()}
-    result.update(tracks=list(tracks), frames=len(clock.times['total']))
+    result.update(tracks=list(tracks), frames=len(clock.times['total']),
+                  completed=[r['completed'] for r in results])
     return result
 
 
@@ -564,6 +592,13 @@ def main(argv=None):
     report['improved_driving'] = drive = time_improved_driving(tracks)
     print(f"\nimproved controller driving (simulate.py, {', '.join(tracks)}: {drive['frames']} "
           'frames in turn, with the lane from the frames before):')
+    print(stage_table(drive))
+    tracks = ['s_bend'] if args.quick else list(PRESET_TRACKS)
+    report['improved_driving_duckiebot'] = drive = time_improved_driving(
+        tracks, robot='duckiebot', world='duckietown')
+    print(f"\nimproved controller driving with --robot duckiebot (simulate.py, the duckietown "
+          f"world, {', '.join(tracks)}: {drive['frames']} frames in turn; the simulated "
+          'camera\'s mounting, as --mounting gives it):')
     print(stage_table(drive))
     report['worst_case'] = worst = worst_case()
     w = worst['lecture']
