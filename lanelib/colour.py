@@ -54,15 +54,28 @@ def colour_masks(bgr, roi, colours=None, surroundings=None):
     contrast = max(20.0, 2.5 * spread)
     a = a.astype(np.int16) - int(_median(a, floor))
     b = b.astype(np.int16) - int(_median(b, floor))
-    masks = {'red': (a > 25) & (a > np.abs(b))}
+    # each colour's further tests only where its first one holds: a few pixels of the band
+    fa, fb = a.ravel(), b.ravel()
+    masks = {'red': _where(a > 25, lambda at: fa[at] > np.abs(fb[at]))}
     if wanted & {'white', 'any'}:
         masks['any'] = (local > contrast) & (light > bright + 25) & ~masks['red']
     if 'white' in wanted:
-        masks['white'] = masks['any'] & (a.astype(np.int32) ** 2 + b.astype(np.int32) ** 2 < 625)
+        masks['white'] = _where(masks['any'], lambda at: fa[at].astype(np.int32) ** 2 +
+                                fb[at].astype(np.int32) ** 2 < 625)
     if 'yellow' in wanted:
-        masks['yellow'] = (b > 25) & (2 * b > 3 * np.abs(a)) & (light > bright)
+        masks['yellow'] = _where(b > 25, lambda at: (2 * fb[at] > 3 * np.abs(fa[at])) &
+                                 (light.ravel()[at] > bright))
     return {name: masks[name].view(np.uint8) * np.uint8(255)
             for name in ('white', 'yellow', 'red', 'any') if name in wanted}
+
+
+def _where(first, rest):
+    """The boolean mask `first` & rest(at), rest given the flat indices `at` where first is
+    set and answering for those alone."""
+    at = np.flatnonzero(first)
+    out = np.zeros_like(first)
+    out.ravel()[at] = rest(at)
+    return out
 
 
 def floor_boxes(roi):
@@ -99,11 +112,17 @@ class Piece:
         self.x, self.y, self.phi, self.colour = x, y, phi, colour
         self.length, self.width = length, width
         self.region = region  # the connected region of the mask it was cut from: one tape
-        self.w = np.full(len(x), length / len(x))
-        runs = np.array_split(np.argsort(x * math.cos(phi) + y * math.sin(phi)), POINTS)
-        self.summary = (np.array([x[i].sum() / len(i) for i in runs]),  # the means (np.mean
-                        np.array([y[i].sum() / len(i) for i in runs]),  # divides the same sum)
-                        np.full(POINTS, length / POINTS))
+        n = len(x)
+        self.w = np.full(n, length / n)
+        order = np.argsort(x * math.cos(phi) + y * math.sin(phi))
+        xs, ys = x[order], y[order]
+        # the runs np.array_split makes (the first n % POINTS one longer), as slices: its
+        # index arrays cost more than the sums
+        q, r = divmod(n, POINTS)
+        ends = [k * q + min(k, r) for k in range(POINTS + 1)]
+        self.summary = (np.array([xs[a:b].sum() / (b - a) for a, b in zip(ends, ends[1:])]),
+                        np.array([ys[a:b].sum() / (b - a) for a, b in zip(ends, ends[1:])]),
+                        np.full(POINTS, length / POINTS))  # the means: np.mean's sum, divided
 
 
 def tape_pieces(mask, colour, matrix, mounting, tape_width, min_length, step, row0=0,
@@ -122,8 +141,12 @@ def tape_pieces(mask, colour, matrix, mounting, tape_width, min_length, step, ro
     (a mask: the edge of the view, see view_sides), the view cuts the tape: the points level
     with the cut are left out (their middle is not the tape's). At most `budget` pixels of a
     region and max_points of a piece are used."""
-    count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
-    pieces = []
+    # Grana's block-based labelling: the same labels as the default (Spaghetti) on 8-connected
+    # masks, in two thirds of its time on the floor band's
+    count, labels, stats, _ = cv2.connectedComponentsWithStatsWithAlgorithm(
+        mask, 8, cv2.CV_32S, cv2.CCL_BBDT)
+    regions = []  # (label, the pixels' view cuts) of each region, its pixels projected at once
+    uv = []
     for i in range(1, count):
         if stats[i, cv2.CC_STAT_AREA] < 20:
             continue
@@ -135,9 +158,16 @@ def tape_pieces(mask, colour, matrix, mounting, tape_width, min_length, step, ro
         cut = side[rows, cols] if side is not None else np.zeros(len(rows), bool)
         use = cut.copy()  # every pixel where the view cuts the tape, and a sample of the rest
         use[::max(1, len(rows) // budget)] = True
-        uv = np.stack([cols[use], rows[use] + row0], axis=1).astype(float)
-        x, y, ok = pixels_to_floor(uv, matrix, mounting)
-        x, y, cut = x[ok], y[ok], cut[use][ok]
+        regions.append((i, cut[use]))
+        uv.append(np.stack([cols[use], rows[use] + row0], axis=1))
+    if not regions:
+        return []
+    # one call for every region's pixels: a call a region cost more than the projecting
+    ends = np.cumsum([len(cut) for _, cut in regions])[:-1]
+    floor = pixels_to_floor(np.concatenate(uv).astype(float), matrix, mounting)
+    pieces = []
+    for (i, cut), x, y, ok in zip(regions, *(np.split(v, ends) for v in floor)):
+        x, y, cut = x[ok], y[ok], cut[ok]
         if len(x) < 10:
             continue
         # across by distance ahead first (the image's rows), then each part that is still
