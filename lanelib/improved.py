@@ -280,7 +280,7 @@ class ImprovedController:
             self.view = FloorView(self.camera, w, h, self.p)
         self.mark('start')
         return perceive(frame, self.view, self.profile, self.p, self.piece_length, keep_stages,
-                        self.mark)
+                        self.mark, self.pitch_error)
 
     def elapsed(self, t):
         """Seconds since the last frame: from the frames' times `t` when the loop gives them
@@ -343,8 +343,13 @@ class ImprovedController:
         # one_line_width 'measured': with one line in view, the lane lies half the width last
         # measured with both beside it (the profile's half, with the camera's pitch a little
         # off and the lines looking further apart, moved the lane sideways as a line left view)
-        pieces = (repitched_pieces(detection.pieces, p.mounting, self.pitch_error)
-                  if self.pitch_error else detection.pieces)
+        # perceive() puts the pieces on the floor with the pitch corrected as it then was; a
+        # detection made otherwise (or before a change) is moved by what it lacks (moving
+        # every point of every piece took as long as the colour stage)
+        made = getattr(detection, 'pitch', 0.0)  # (pieces made by hand: on the mounting's)
+        turn = self.pitch_error - made
+        seen = replace(p.mounting, pitch_deg=p.mounting.pitch_deg + made)
+        pieces = repitched_pieces(detection.pieces, seen, turn) if turn else detection.pieces
         blind = self.lost_for > p.lost_timeout  # the estimate from before is stale
         current = prior is not None and not blind  # the prediction stands for this frame
         expected = (prior.curvature, p.bend_belief / w) if p.bend_belief and current else None

@@ -14,6 +14,7 @@ undistorted only when a picture needs it (then its masks are the whole frame's t
 """
 
 import math
+from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -75,14 +76,19 @@ class FloorView:
                          cv2.INTER_LINEAR)
 
 
-def perceive(frame, view, profile, p, piece_length, keep_stages=False, mark=None):
+def perceive(frame, view, profile, p, piece_length, keep_stages=False, mark=None, pitch=0.0):
     """One frame's Detection: its pieces of tape (colour.Piece, robot frame) in the lane
     profile's colours, the longest p.max_pieces of them (`cluttered` when there were more),
     and the band's colour masks (masks, first row); the undistorted frame made when needed.
-    mark: called with 'undistort', 'colour' and 'pieces' as each stage ends (tools/bench)."""
+    mark: called with 'undistort', 'colour' and 'pieces' as each stage ends (tools/bench).
+    pitch [deg]: the camera looks this much further down than p.mounting says (the
+    controller's correction, pitch_tolerance): the pieces are put on the floor so, the band
+    stays the one p.mounting gives."""
     mark = mark or (lambda stage: None)
     raw = as_bgr(frame)
     detection = Detection(np.empty((0, 4), np.int32), slope_sum(np.empty((0, 4))))
+    detection.pitch = pitch
+    mounting = replace(p.mounting, pitch_deg=p.mounting.pitch_deg + pitch) if pitch else p.mounting
     if keep_stages or view.last <= view.first:  # the whole frame (and no floor in view)
         image = view.undistort(raw)
         detection.set_image(image)
@@ -103,7 +109,7 @@ def perceive(frame, view, profile, p, piece_length, keep_stages=False, mark=None
         # a colour only dashed lines have is cut into dashes; one a solid line has, into lines
         style = 'dashed' if all(line.style == 'dashed' for line in lines) else 'solid'
         pieces += tape_pieces(cv2.bitwise_and(masks[colour], floor), colour, view.matrix,
-                              p.mounting, max(line.width for line in lines),
+                              mounting, max(line.width for line in lines),
                               0.1 * p.lane_width, piece_length, row0=first, side=sides,
                               elongation=ELONGATION[style])
     pieces.sort(key=lambda piece: -piece.length)

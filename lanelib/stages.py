@@ -95,14 +95,15 @@ class Detection:
     pictures need the whole of it); stages: intermediate images, only when asked for;
     The improved controller reads colours instead of segments and adds: pieces, the pieces of
     tape it found (lanelib/colour.py); masks, its colour masks and the row they start at;
-    cluttered, more pieces than it reads (it keeps the longest).
+    cluttered, more pieces than it reads (it keeps the longest); pitch [deg], how much further
+    down than its mounting it took the camera to look when it put the pieces on the floor.
     """
 
     def __init__(self, lines, slopes, image=None, stages=None, make_image=None,
                  cluttered=False):
         self.lines, self.slopes, self.stages = lines, slopes, stages
         self.cluttered = cluttered
-        self.pieces, self.masks = [], ({}, 0)
+        self.pieces, self.masks, self.pitch = [], ({}, 0), 0.0
         self._image, self._make_image = image, make_image
 
     @property
