@@ -23,11 +23,6 @@ from lanelib.lanefit import fit_lanes, signed_distance
 from lanelib.robot import arc_step
 
 ENOUGH = 6  # points: fewer remembered in a stretch say nothing of it
-# points a frame adds at most: every piece of line brings up to 120 (colour.tape_pieces), so a
-# frame with both lines in view brought about 1,300, and 4 s at 8 Hz held 42,000, which every
-# fit of the memory went through (1.7 ms a frame); a parabola through a metre of lane needs
-# far fewer
-KEPT = 200
 
 
 class LaneMemory:
@@ -60,11 +55,7 @@ class LaneMemory:
         self._local = None
 
     def add(self, x, y, w):
-        """Centre-line points seen now (robot frame): at most KEPT of them, every so many,
-        each with the weight of the run it stands for (the frame's weight stays what it was)."""
-        if len(x) > KEPT:
-            starts = np.arange(0, len(x), -(-len(x) // KEPT))
-            x, y, w = x[starts], y[starts], np.add.reduceat(w, starts)
+        """Centre-line points seen now (robot frame)."""
         px, py, yaw = self.pose
         cos, sin = math.cos(yaw), math.sin(yaw)
         self.chunks.append((self.t, px + cos * x - sin * y, py + sin * x + cos * y, w))
