@@ -410,6 +410,51 @@ def test_the_controller_reads_a_rendered_duckietown_lane():
     assert command.decision == 'straight' and command.angular_z > 0  # back to the centre
 
 
+def test_the_pitch_correction_puts_the_pieces_on_the_floor_once_in_perceive(monkeypatch):
+    # with the camera's pitch corrected, perceive() projects the pixels with it: the pieces
+    # lie where moving those found with the mounting's pitch puts them (geometry.repitched),
+    # and the controller does not move them a second time
+    import lanelib.improved as improved
+    from lanelib.camera import Camera
+    from lanelib.perception import repitched_pieces
+
+    image = np.full((480, 640, 3), 60, np.uint8)
+    for y, width, colour in ((0.02 + DT.lane_width / 2, 0.025, YELLOW),
+                             (0.02 - DT.lane_width / 2, 0.05, WHITE)):
+        image[painted([(y, width)]) > 0] = colour
+    p = ImprovedParams(lane='duckietown', camera_height=0.10, camera_pitch=20.0,
+                       camera_forward=0.0, roi_near=0.12 / 0.2375, roi_far=0.8 / 0.2375,
+                       memory=0.0, pitch_tolerance=4.0)
+    camera = Camera('pinhole', K, np.zeros(5), (640, 480))
+    ctl = ImprovedController(LaneParams(), p, camera)
+    level = ctl.perceive(image)
+    ctl.pitch_error = 2.0
+    turned = ctl.perceive(image)
+    assert (level.pitch, turned.pitch) == (0.0, 2.0)
+    moved = repitched_pieces(level.pieces, ctl.p.mounting, 2.0)
+
+    def points(pieces, colour):
+        return np.concatenate([np.stack([q.x, q.y], 1) for q in pieces if q.colour == colour])
+
+    def line(pieces, colour):  # [m] where the line's points put it 0.2 and 0.5 m ahead
+        x, y = points(pieces, colour).T
+        return np.polyval(np.polyfit(x, y, 1), [0.2, 0.5])
+
+    # (cut into pieces on the floor each sees, so not the same pieces: the same lines)
+    for colour in ('white', 'yellow'):
+        now, then, before = (line(d, colour) for d in (turned.pieces, moved, level.pieces))
+        assert np.abs(now - then).max() < 0.002
+        assert np.abs(before - then).max() > 0.005  # the correction does move them
+    calls = []
+    monkeypatch.setattr(improved, 'repitched_pieces',
+                        lambda *args: calls.append(args[2]) or repitched_pieces(*args))
+    ctl(turned)
+    assert calls == []  # already where the corrected pitch puts them
+    ctl.pitch_error = 2.0
+    ctl(level)  # a detection made before the correction: moved by what it lacks
+    assert calls == [2.0]
+
+
 def test_an_expected_lane_steadies_the_offset_a_far_bend_cannot_fix():
     # one line seen only far ahead, bending: many arcs through the robot fit it nearly as
     # well; the offset and heading the lane had at the robot (from memory) pick the right one

@@ -129,6 +129,24 @@ def test_the_benchmarks_literal_dry_run_is_the_nodes_main_with_the_slides_calls(
     assert 'straight 28' in capsys.readouterr().err
 
 
+def test_the_benchmark_drives_a_preset_with_the_settings_the_node_resolves_from_it():
+    # tools.bench's 'driving with --robot duckiebot' row: the preset's settings, as
+    # `--robot duckiebot --controller improved` gives them, but the simulated camera's mounting
+    from lanelib.sim.tracks import load_track, with_world
+    from lanelib.sim.world import WORLDS
+    from tools.bench import preset_settings
+
+    spec = with_world(load_track('s_bend'), WORLDS['duckietown'])
+    params, improved = preset_settings('duckiebot', spec)
+    assert params.rate == 8  # the preset's loop rate, not the lecture's 4 Hz
+    assert (improved.lane, improved.v_max, improved.roi_near, improved.bend_belief,
+            improved.pitch_tolerance, improved.one_line_width) == (
+        'duckietown', 1.25, 0.42, 1.0, 4.0, 'measured')
+    assert (improved.camera_height, improved.camera_pitch) == (spec.mounting.height,
+                                                                spec.mounting.pitch_deg)
+    assert improved.lane_width == spec.track.lane_width
+
+
 def test_the_benchmark_times_the_improved_perception_with_the_lane_profile_asked_for():
     frame = sample_frames()[0]
     for lane, colours in (('lecture', {'any', 'red'}), ('duckietown', {'white', 'yellow', 'red'})):
