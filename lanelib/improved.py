@@ -347,9 +347,10 @@ class ImprovedController:
         # detection made otherwise (or before a change) is moved by what it lacks (moving
         # every point of every piece took as long as the colour stage)
         made = getattr(detection, 'pitch', 0.0)  # (pieces made by hand: on the mounting's)
-        turn = self.pitch_error - made
-        seen = replace(p.mounting, pitch_deg=p.mounting.pitch_deg + made)
-        pieces = repitched_pieces(detection.pieces, seen, turn) if turn else detection.pieces
+        pieces = detection.pieces
+        if self.pitch_error != made:
+            seen = replace(p.mounting, pitch_deg=p.mounting.pitch_deg + made)
+            pieces = repitched_pieces(pieces, seen, self.pitch_error - made)
         blind = self.lost_for > p.lost_timeout  # the estimate from before is stale
         current = prior is not None and not blind  # the prediction stands for this frame
         expected = (prior.curvature, p.bend_belief / w) if p.bend_belief and current else None

@@ -73,7 +73,7 @@ from tools.common import REPO, SAMPLES, machine, rss_mb, whole_number, write_jso
 OUT = os.path.join('out', 'bench')
 STAGES = ('undistort', 'gray', 'blur', 'canny', 'roi', 'hough', 'slopes')
 IMPROVED_STAGES = ('undistort', 'colour', 'pieces', 'lane', 'steer')
-# the duckiebot preset's driving: Duckietown's lane on an S-bend and on corners of 0.5 m radius
+# the duckiebot preset's driving: Duckietown's lane on the two S-bends (1.0 and 0.9 m radius)
 PRESET_TRACKS = ('s_bend', 'tight')
 
 
