@@ -27,7 +27,8 @@ every built-in track, with offsets, noise, a lighting gradient and gaps), prints
               every frame of simulate.py's closed-loop runs of the lane tracks (the lecture's
               world) in turn, as a running node reads them, with the lane from the frames
               before (the prior's refit, the memory, the bend), which costs more than a fresh
-              frame (--quick: the lecture track only)
+              frame (--quick: the lecture track only); and the same with the settings
+              --robot duckiebot gives, on the duckietown world's S-bends (--quick: s_bend)
   worst case  cluttered frames (dense texture, many edges; plain floor with up to 1,600
               lines): the lecture's Hough stage, the improved controller's whole frame
 
