@@ -5,7 +5,7 @@ Camera: OpenCV's (x right, y down, z along the optical axis), pitched down by `p
 """
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -16,6 +16,10 @@ class Mounting:
     pitch_deg: float = 0.0  # [deg] optical axis below horizontal
     forward: float = 0.10  # [m] lens ahead of the robot's centre
     roll_deg: float = 0.0  # [deg] about the optical axis, + when the camera's right side is lower
+
+    def looking_down(self, turn_deg):
+        """The same camera looking `turn_deg` further down (itself for 0)."""
+        return replace(self, pitch_deg=self.pitch_deg + turn_deg) if turn_deg else self
 
 
 def camera_axes(pitch_deg, roll_deg=0.0):

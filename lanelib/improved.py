@@ -271,8 +271,7 @@ class ImprovedController:
     def mounting(self):
         """The camera's mounting as the controller now takes it (the lane is drawn on the
         frame with it): the pitch corrected by what the lane's lines say (pitch_tolerance)."""
-        m = self.p.mounting
-        return replace(m, pitch_deg=m.pitch_deg + self.pitch_error) if self.pitch_error else m
+        return self.p.mounting.looking_down(self.pitch_error)
 
     def perceive(self, frame, keep_stages=False):
         h, w = frame.shape[:2]
@@ -349,8 +348,8 @@ class ImprovedController:
         made = getattr(detection, 'pitch', 0.0)  # (pieces made by hand: on the mounting's)
         pieces = detection.pieces
         if self.pitch_error != made:
-            seen = replace(p.mounting, pitch_deg=p.mounting.pitch_deg + made)
-            pieces = repitched_pieces(pieces, seen, self.pitch_error - made)
+            pieces = repitched_pieces(pieces, p.mounting.looking_down(made),
+                                      self.pitch_error - made)
         blind = self.lost_for > p.lost_timeout  # the estimate from before is stale
         current = prior is not None and not blind  # the prediction stands for this frame
         expected = (prior.curvature, p.bend_belief / w) if p.bend_belief and current else None

@@ -14,7 +14,6 @@ undistorted only when a picture needs it (then its masks are the whole frame's t
 """
 
 import math
-from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -88,7 +87,7 @@ def perceive(frame, view, profile, p, piece_length, keep_stages=False, mark=None
     raw = as_bgr(frame)
     detection = Detection(np.empty((0, 4), np.int32), slope_sum(np.empty((0, 4))))
     detection.pitch = pitch
-    mounting = replace(p.mounting, pitch_deg=p.mounting.pitch_deg + pitch) if pitch else p.mounting
+    mounting = p.mounting.looking_down(pitch)
     if keep_stages or view.last <= view.first:  # the whole frame (and no floor in view)
         image = view.undistort(raw)
         detection.set_image(image)
