@@ -390,18 +390,26 @@ def test_a_lane_with_a_line_down_its_middle_is_not_chosen():
     assert fit.e == pytest.approx(-0.05 + w / 2, abs=0.01)
 
 
-def test_the_controller_reads_a_rendered_duckietown_lane():
-    # the colour masks, the pieces and the fit together, on a painted floor
+def rendered_duckietown_lane(**settings):
+    """(image, controller): a painted Duckietown lane 2 cm left of the robot, seen by the
+    pinhole camera K 0.10 m up and pitched 20 degrees, and an improved controller told so
+    (`settings` added to its ImprovedParams)."""
+    from lanelib.camera import Camera
+
     image = np.full((480, 640, 3), 60, np.uint8)
     for y, width, colour in ((0.02 + DT.lane_width / 2, 0.025, YELLOW),
                              (0.02 - DT.lane_width / 2, 0.05, WHITE)):
         image[painted([(y, width)]) > 0] = colour
     p = ImprovedParams(lane='duckietown', camera_height=0.10, camera_pitch=20.0,
                        camera_forward=0.0, roi_near=0.12 / 0.2375, roi_far=0.8 / 0.2375,
-                       memory=0.0)
-    from lanelib.camera import Camera
-    camera = Camera('pinhole', K, np.zeros(5), (640, 480))
-    ctl = ImprovedController(LaneParams(), p, camera)
+                       memory=0.0, **settings)
+    return image, ImprovedController(LaneParams(), p, Camera('pinhole', K, np.zeros(5),
+                                                             (640, 480)))
+
+
+def test_the_controller_reads_a_rendered_duckietown_lane():
+    # the colour masks, the pieces and the fit together, on a painted floor
+    image, ctl = rendered_duckietown_lane()
     command = ctl(ctl.perceive(image))
     record = ctl.extra()
     assert record['offset_m'] == pytest.approx(-0.02, abs=0.01)  # robot right of centre
@@ -415,18 +423,9 @@ def test_the_pitch_correction_puts_the_pieces_on_the_floor_once_in_perceive(monk
     # lie where moving those found with the mounting's pitch puts them (geometry.repitched),
     # and the controller does not move them a second time
     import lanelib.improved as improved
-    from lanelib.camera import Camera
     from lanelib.perception import repitched_pieces
 
-    image = np.full((480, 640, 3), 60, np.uint8)
-    for y, width, colour in ((0.02 + DT.lane_width / 2, 0.025, YELLOW),
-                             (0.02 - DT.lane_width / 2, 0.05, WHITE)):
-        image[painted([(y, width)]) > 0] = colour
-    p = ImprovedParams(lane='duckietown', camera_height=0.10, camera_pitch=20.0,
-                       camera_forward=0.0, roi_near=0.12 / 0.2375, roi_far=0.8 / 0.2375,
-                       memory=0.0, pitch_tolerance=4.0)
-    camera = Camera('pinhole', K, np.zeros(5), (640, 480))
-    ctl = ImprovedController(LaneParams(), p, camera)
+    image, ctl = rendered_duckietown_lane(pitch_tolerance=4.0)
     level = ctl.perceive(image)
     ctl.pitch_error = 2.0
     turned = ctl.perceive(image)
