@@ -67,8 +67,21 @@ def test_the_node_with_the_preset_reads_rendered_bends(labelled, tmp_path, capsy
                                                             'duckiebot')
     assert results['rendered/empty.png']['improved'] == 'none'
     text = capsys.readouterr().out
-    assert 'improved  4/4 (100%), turn direction 2/2 (100%)' in text
+    assert ('improved  4/4 (100%), turn direction 2/2 (100%), command turned 2/2 (100%)'
+            in text)
     assert 'straight  1/4 (25%), turn direction 0/2 (0%)' in text
+
+
+def test_the_command_is_counted_by_the_way_it_turns_apart_from_the_word():
+    """A bend decided 'left' whose command turns right (a robot left of its lane's centre
+    before a left bend re-centres first) counts for the word, not for the command."""
+    def result(expected, word, omega):
+        return dict(expected=expected, improved=word, improved_detail=dict(angular_z=omega))
+    rows = [result('left', 'left', -0.4), result('right', 'straight', -0.6),
+            result('straight', 'straight', 0.0)]
+    assert evaluate_real.figures(rows, 'improved') == (
+        '2/3 (67%), turn direction 1/2 (50%), command turned 1/2 (50%)')
+    assert [evaluate_real.turned_by(r) for r in rows] == ['right', 'right', 'straight']
 
 
 def test_a_source_with_no_preset_is_refused_before_the_work(labelled):

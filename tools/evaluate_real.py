@@ -15,8 +15,12 @@ from other pictures), with the flags a user types for the picture's robot, and n
 
 A label 'no_lane' expects 'none'. A video counts once, by the decision most of its frames get.
 Figures are printed per source and in all: agreement with the labels, and on the frames labelled
-left or right, how many were turned that way; with and without the labels judged doubtful from
-the pictures (DOUBTFUL below, with why).
+left or right, how many were decided that way ('turn direction'), and for the improved
+controller how many its command itself turned that way ('command turned': the sign of its
+angular.z; the decision word reads where the lane lies at the look-ahead, the command is what the
+robot does first, and the two can differ: a robot left of its lane's centre before a left bend
+turns right first); with and without the labels judged doubtful from the pictures (DOUBTFUL
+below, with why).
 
 The presets (--robot SOURCE=PRESET, repeatable, overrides these; a source is a label's first
 folder, and its name's start is enough):
@@ -186,14 +190,27 @@ def evaluate(folder, presets, pictures=None):
 
 
 def figures(results, name):
-    """'agree/n (pct), turn direction right/turns (pct)' for one way of deciding."""
+    """'agree/n (pct), turn direction right/turns (pct)' for one way of deciding; for the
+    improved controller also ', command turned right/turns (pct)'."""
     n = len(results)
     agree = sum(r[name] == r['expected'] for r in results)
     turns = [r for r in results if r['expected'] in ('left', 'right')]
     right = sum(r[name] == r['expected'] for r in turns)
     pct = f' ({agree / n:.0%})' if n else ''
     tpct = f' ({right / len(turns):.0%})' if turns else ''
-    return f'{agree}/{n}{pct}, turn direction {right}/{len(turns)}{tpct}'
+    out = f'{agree}/{n}{pct}, turn direction {right}/{len(turns)}{tpct}'
+    if name == 'improved':
+        turned = sum(turned_by(r) == r['expected'] for r in turns)
+        out += f', command turned {turned}/{len(turns)}' + (
+            f' ({turned / len(turns):.0%})' if turns else '')
+    return out
+
+
+def turned_by(result):
+    """'left' or 'right': the way the improved controller's command for the picture (of a
+    video, its last frame's) turns the robot (the sign of its angular.z), else 'straight'."""
+    omega = (result.get('improved_detail') or {}).get('angular_z') or 0.0
+    return 'left' if omega > 0 else 'right' if omega < 0 else 'straight'
 
 
 def report(results, details=False, stream=None):
@@ -216,10 +233,11 @@ def report(results, details=False, stream=None):
         if r['doubtful']:
             stream.write(f"  {r['file']} ({r['expected']}): {r['doubtful']}\n")
     if details:
-        stream.write('\n| file | label | lecture | improved |\n|---|---|---|---|\n')
+        stream.write('\n| file | label | lecture | improved | its command turned |\n'
+                     '|---|---|---|---|---|\n')
         for r in results:
             stream.write(f"| {r['file']} | {r['expected']}{' (doubtful)' if r['doubtful'] else ''}"
-                         f" | {r['lecture']} | {r['improved']} |\n")
+                         f" | {r['lecture']} | {r['improved']} | {turned_by(r)} |\n")
 
 
 def preset_option(text):
