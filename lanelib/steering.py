@@ -17,6 +17,15 @@ worse on Duckietown's tight corners, where the robot ran wide and left the lane 
 episodes of its simulator (with this law, 0 of 4): the estimate of a bend seen briefly is
 straighter than the bend, and this law's over-steer on bends is what makes up for it.
 
+Its limit: both terms are 1/R only to first order in x / R. Where the point lies far round a
+bend (x near R or beyond, a Duckietown inner lane's 0.18 m corner seen 0.37 m ahead), the
+slope there is mostly the bend's, and weighed by 1 - alpha it can turn the robot against the
+bend: on a real Duckietown frame (316closed_0082) the point is straight ahead with the line there
+turned 19 degrees left, and the command turns right. Written from the robot's offset and
+heading to the lane where it is, with the curvature fed forward, the law is exact on any bend,
+but measured so it ran wide on the outer lane's corners, for the reason above
+(docs/benchmarks.md, thirteenth session).
+
 Speed: v_max, divided by (1 + curve_slowdown |k_cmd|) on bends, times
 (1 - unsure_slowdown (1 - confidence)) (the lecture's Kobuki: half speed when the estimate is
 unsure), never below v_min; angular.z = v k_cmd within omega_max.
