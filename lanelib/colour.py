@@ -1,9 +1,14 @@
 """Colour for the improved controller: which pixels are white, yellow or red tape, in the light
 that is actually there, and the tape pieces they make on the floor.
 
-The thresholds adapt to each frame instead of being fixed for one room. In Lab, the floor's own
-colour (the median of the floor band, which is mostly floor) is taken as neutral, so a colour
-cast from the light or the camera's white balance is removed, and brightness is judged against
+The thresholds adapt to each frame instead of being fixed for one room. The road is taken as
+grey and the light's colour as what makes it look otherwise: the road's colour is the floor
+band's commonest (the peak of its a*, b* histogram: grass, sky or a mat at the side, which move
+a median, do not move it), and each pixel is judged as it would look had a gain per channel made
+the road grey (von Kries). A light multiplies every channel, so white tape under a yellow light
+is the road's own yellow, brighter, and comes out white; subtracting the road's a*, b* instead
+(as before) left it yellow on a dark road, whose a*, b* are small for the same light. The gains
+only raise a channel, so a pixel the camera clipped stays white. Brightness is judged against
 the floor around the pixel (a box a fifth of the image wide, the wall and the empty border
 undistortion leaves not counted), so dim rooms, bright sun, glare and shadows shift the
 threshold with them:
@@ -13,11 +18,15 @@ threshold with them:
     any     a tape of any colour but red lighter than the floor: brighter than its
             surroundings and the floor as white is, whatever its colour (a floor's dark seams
             are not tape; nor is dark tape on a light floor, which this does not look for)
-    yellow  b* (yellow-blue) at least 25 above the floor's, more yellow than red or green, and
-            brighter than the floor
-    red     a* (red-green) at least 25 above the floor's (stop lines: never a lane line)
-"""
+    yellow  b* (yellow-blue) above 25, more yellow than red or green, and brighter than the
+            floor
+    red     a* (red-green) above 25, more red than yellow (stop lines: never a lane line)
 
+(a*, b* as the road made grey would show them, from neutral.) The gains are applied only where
+a colour may be: a first look scales the road's a*, b* to each pixel's lightness (a grey
+surface's grow with L* + 16 under one light: Lab's cube root of a gain) and keeps the pixels
+within NEAR of each test; the exact test runs on those alone.
+"""
 import math
 
 import cv2
@@ -32,6 +41,12 @@ BOX = 0.2  # [image widths] the surroundings a pixel's brightness is judged agai
 # widened them and a camera pitched a little off has shortened them (gym-duckietown with
 # domain rand: 0.041 to 0.047 m by 0.029 to 0.032, half the dashes in view of a frame)
 ELONGATION = {'solid': 1.5, 'dashed': 1.2}
+CAST = 4.0  # [gain] a channel of the road's colour is raised at most this much (a road with
+# almost none of a channel says little of the light's colour there)
+NEAR = 16  # [Lab levels] the first look's margin: where the exact test holds, its a*, b* fell
+# short of the exact by at most 14 (the real frames' and gym-duckietown's first frames' lower
+# halves, with domain rand)
+LAB_BLACK = 16 * 255 / 100  # L* + 16 in 8-bit levels: Lab's cube root of the luminance
 POINTS = 3  # points that stand for a piece when the lane is fitted (Piece.summary)
 
 
@@ -52,21 +67,79 @@ def colour_masks(bgr, roi, colours=None, surroundings=None):
     spread = 1.5 * _median(cv2.convertScaleAbs(local), floor) + 1.0
     bright = _median(light, floor)
     contrast = max(20.0, 2.5 * spread)
-    a = a.astype(np.int16) - int(_median(a, floor))
-    b = b.astype(np.int16) - int(_median(b, floor))
-    # each colour's further tests only where its first one holds: a few pixels of the band
-    fa, fb = a.ravel(), b.ravel()
-    masks = {'red': _where(a > 25, lambda at: fa[at] > np.abs(fb[at]))}
+    road = _commonest(a, b, floor)
+    # a first look, cheap and close: a grey surface's a*, b* (128 in 8 bits) are the light's
+    # and grow with its L* + 16 (Lab's cube root of a gain per channel), so the road's are
+    # scaled to each pixel's lightness; then each colour's exact test only where it may hold
+    scale = (np.arange(256) + LAB_BLACK) / (bright + LAB_BLACK)
+    near_a = a.astype(np.int16) - cv2.LUT(light, _levels(128 + (road[0] - 128) * scale))
+    near_b = b.astype(np.int16) - cv2.LUT(light, _levels(128 + (road[1] - 128) * scale))
+    balanced = _Balanced(bgr, bright, road)
+    masks = {'red': _where(near_a > 25 - NEAR, balanced.red)}
     if wanted & {'white', 'any'}:
         masks['any'] = (local > contrast) & (light > bright + 25) & ~masks['red']
     if 'white' in wanted:
-        masks['white'] = _where(masks['any'], lambda at: fa[at].astype(np.int32) ** 2 +
-                                fb[at].astype(np.int32) ** 2 < 625)
+        masks['white'] = _where(masks['any'], balanced.white)
     if 'yellow' in wanted:
-        masks['yellow'] = _where(b > 25, lambda at: (2 * fb[at] > 3 * np.abs(fa[at])) &
-                                 (light.ravel()[at] > bright))
+        masks['yellow'] = _where((near_b > 25 - NEAR) & (light > bright), balanced.yellow)
     return {name: masks[name].view(np.uint8) * np.uint8(255)
             for name in ('white', 'yellow', 'red', 'any') if name in wanted}
+
+
+class _Balanced:
+    """The frame's pixels as a grey road would show them (von Kries): each channel times the
+    gain that makes the road's colour grey, then in Lab, a* and b* from neutral (128); made
+    only for the pixels a test asks about. The gains only raise a channel (at most CAST),
+    so a pixel the camera clipped white stays white."""
+
+    def __init__(self, bgr, bright, road):
+        self.flat = bgr.reshape(-1, 3)
+        grey = cv2.cvtColor(np.uint8([[[round(bright), round(road[0]), round(road[1])]]]),
+                            cv2.COLOR_LAB2BGR).reshape(3).astype(float)
+        self.gains = tuple(np.minimum(grey.max() / np.maximum(grey, 1.0), CAST)) + (0.0,)
+
+    def ab(self, at):
+        if not len(at):
+            return np.zeros(0, np.int32), np.zeros(0, np.int32)
+        seen = cv2.multiply(self.flat[at].reshape(-1, 1, 3), self.gains, dtype=cv2.CV_8U)
+        ab = cv2.cvtColor(seen, cv2.COLOR_BGR2LAB).reshape(-1, 3)[:, 1:].astype(np.int32) - 128
+        return ab[:, 0], ab[:, 1]
+
+    def red(self, at):
+        a, b = self.ab(at)
+        return (a > 25) & (a > np.abs(b))
+
+    def white(self, at):
+        a, b = self.ab(at)
+        return a ** 2 + b ** 2 < 625
+
+    def yellow(self, at):
+        a, b = self.ab(at)
+        return (b > 25) & (2 * b > 3 * np.abs(a))
+
+
+def _levels(values):
+    """Values as uint8 levels, rounded and clipped: a table for cv2.LUT."""
+    return np.clip(np.rint(values), 0, 255).astype(np.uint8)
+
+
+def _commonest(a, b, floor, step=4):
+    """(a*, b*) of the floor band's commonest colour, the road's (grass, sky or a mat at the
+    side do not move it, as they move a median): the peak of their histogram in step-wide bins,
+    each counted with its neighbours, refined as the mean over the peak's 3 x 3 bins. From every
+    other row and column, in about half the time: within 0.07 levels of all the pixels' on the
+    real frames' and gym-duckietown's first frames' lower halves."""
+    bins = 256 // step
+    hist = cv2.calcHist([a[::2, ::2], b[::2, ::2]], [0, 1], floor[::2, ::2], [bins, bins],
+                        [0, 256, 0, 256])
+    near = cv2.boxFilter(hist, -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
+    i, j = np.unravel_index(int(np.argmax(near)), near.shape)
+    i0, j0 = max(i - 1, 0), max(j - 1, 0)
+    patch = hist[i0:i + 2, j0:j + 2]
+    centres = (np.arange(bins) + 0.5) * step
+    total = max(float(patch.sum()), 1.0)
+    return (float(patch.sum(axis=1) @ centres[i0:i + 2]) / total,
+            float(patch.sum(axis=0) @ centres[j0:j + 2]) / total)
 
 
 def _where(first, rest):

@@ -98,6 +98,39 @@ def test_colours_are_found_in_the_light_that_is_there(light, cast):
     assert not columns['any'] & set(range(240, 252))  # red tape on grey is not lighter
 
 
+@pytest.mark.parametrize('light', [0.6, 1.0, 1.3], ids=['dim', 'lit', 'clipping'])
+@pytest.mark.parametrize('cast', [(0.5, 0.9, 1.0), (0.6, 1.0, 0.8), (1.0, 0.7, 0.9)],
+                         ids=['yellow light', 'green light', 'magenta light'])
+def test_a_coloured_light_does_not_colour_white_tape(light, cast):
+    # a light multiplies every channel: on a dark road, white tape under a yellow light is
+    # the road's colour times more light, so it looks yellow by an offset in a*, b* (gym-
+    # duckietown's domain randomisation: the robot never moved), grey once the road is
+    scene = floor_scene(floor=(60, 60, 60),
+                        tapes=[(60, 12, WHITE), (150, 12, YELLOW), (240, 12, RED)])
+    lit = np.clip(scene * light * np.array(cast), 0, 255).astype(np.uint8)
+    masks = colour_masks(lit, np.full(lit.shape[:2], 255, np.uint8))
+    columns = {name: set(np.flatnonzero(mask.any(axis=0))) for name, mask in masks.items()}
+    assert columns['white'] == set(range(60, 72))
+    assert columns['yellow'] == set(range(150, 162))
+    assert columns['red'] == set(range(240, 252))
+
+
+def test_grass_beside_the_road_neither_sets_its_colour_nor_becomes_white():
+    # the light's colour is the road's commonest colour, not the band's median: with nearly
+    # half the band in speckled grass, under a yellow light, the tapes on the road are found
+    # as they are and no speck of grass is white
+    rng = np.random.default_rng(1)
+    scene = floor_scene(floor=(60, 60, 60), tapes=[(40, 12, WHITE), (110, 12, YELLOW)])
+    grass = np.stack([rng.integers(20, 60, (240, 150)), rng.integers(90, 200, (240, 150)),
+                      rng.integers(30, 90, (240, 150))], axis=2)
+    scene[:, 170:] = grass
+    lit = np.clip(scene * np.array((0.5, 0.9, 1.0)), 0, 255).astype(np.uint8)
+    masks = colour_masks(lit, np.full(lit.shape[:2], 255, np.uint8))
+    columns = {name: set(np.flatnonzero(mask.any(axis=0))) for name, mask in masks.items()}
+    assert columns['white'] == set(range(40, 52))  # and no speck of grass
+    assert columns['yellow'] - set(range(170, 320)) == set(range(110, 122))
+
+
 @pytest.mark.parametrize('colours', [['any'], ['white', 'yellow'], ['yellow']])
 def test_only_the_colours_asked_for_are_made_and_they_are_the_same(colours):
     # the controller asks for its profile's colours and keeps the floor's surroundings per
