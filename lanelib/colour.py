@@ -27,6 +27,7 @@ a colour may be: a first look scales the road's a*, b* to each pixel's lightness
 surface's grow with L* + 16 under one light: Lab's cube root of a gain) and keeps the pixels
 within NEAR of each test; the exact test runs on those alone.
 """
+
 import math
 
 import cv2
