@@ -84,13 +84,19 @@ def floor_scene(floor=(90, 90, 90), tapes=(), size=(240, 320)):
 WHITE, YELLOW, RED = (235, 235, 235), (40, 200, 220), (40, 40, 210)
 
 
+def columns_under(scene, light):
+    """The image columns each colour mask holds, the scene lit by `light` (a gain, or one per
+    BGR channel) and judged over the whole frame."""
+    lit = np.clip(scene * np.asarray(light), 0, 255).astype(np.uint8)
+    masks = colour_masks(lit, np.full(lit.shape[:2], 255, np.uint8))
+    return {name: set(np.flatnonzero(mask.any(axis=0))) for name, mask in masks.items()}
+
+
 @pytest.mark.parametrize('light', [0.35, 1.0, 1.6], ids=['dim room', 'lab', 'bright sun'])
 @pytest.mark.parametrize('cast', [(1.0, 1.0, 1.0), (0.8, 0.95, 1.25)], ids=['neutral', 'warm'])
 def test_colours_are_found_in_the_light_that_is_there(light, cast):
     scene = floor_scene(tapes=[(60, 12, WHITE), (150, 12, YELLOW), (240, 12, RED)])
-    lit = np.clip(scene * light * np.array(cast), 0, 255).astype(np.uint8)
-    masks = colour_masks(lit, np.full(lit.shape[:2], 255, np.uint8))
-    columns = {name: set(np.flatnonzero(mask.any(axis=0))) for name, mask in masks.items()}
+    columns = columns_under(scene, light * np.array(cast))
     assert columns['white'] == set(range(60, 72))
     assert columns['yellow'] == set(range(150, 162))
     assert columns['red'] == set(range(240, 252))
@@ -107,9 +113,7 @@ def test_a_coloured_light_does_not_colour_white_tape(light, cast):
     # duckietown's domain randomisation: the robot never moved), grey once the road is
     scene = floor_scene(floor=(60, 60, 60),
                         tapes=[(60, 12, WHITE), (150, 12, YELLOW), (240, 12, RED)])
-    lit = np.clip(scene * light * np.array(cast), 0, 255).astype(np.uint8)
-    masks = colour_masks(lit, np.full(lit.shape[:2], 255, np.uint8))
-    columns = {name: set(np.flatnonzero(mask.any(axis=0))) for name, mask in masks.items()}
+    columns = columns_under(scene, light * np.array(cast))
     assert columns['white'] == set(range(60, 72))
     assert columns['yellow'] == set(range(150, 162))
     assert columns['red'] == set(range(240, 252))
@@ -124,9 +128,7 @@ def test_grass_beside_the_road_neither_sets_its_colour_nor_becomes_white():
     grass = np.stack([rng.integers(20, 60, (240, 150)), rng.integers(90, 200, (240, 150)),
                       rng.integers(30, 90, (240, 150))], axis=2)
     scene[:, 170:] = grass
-    lit = np.clip(scene * np.array((0.5, 0.9, 1.0)), 0, 255).astype(np.uint8)
-    masks = colour_masks(lit, np.full(lit.shape[:2], 255, np.uint8))
-    columns = {name: set(np.flatnonzero(mask.any(axis=0))) for name, mask in masks.items()}
+    columns = columns_under(scene, (0.5, 0.9, 1.0))
     assert columns['white'] == set(range(40, 52))  # and no speck of grass
     assert columns['yellow'] - set(range(170, 320)) == set(range(110, 122))
 
