@@ -34,11 +34,15 @@ exit status: 0 the run completed (--benchmark: every improved-controller run com
 did not (a departure, a stall, the time limit), 2 bad arguments or track file.
 """
 
+import os
+
+# numpy's BLAS one thread, as the node runs it (see kobuki_lane.py): set before numpy loads.
+os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
+
 import argparse
 import functools
 import json
 import math
-import os
 import sys
 
 import cv2

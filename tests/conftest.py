@@ -2,6 +2,10 @@
 test modules are in helpers.py."""
 
 import os
+
+# numpy's BLAS one thread, as the node runs it (see kobuki_lane.py): set before numpy loads.
+os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
+
 import shutil
 import socket
 import threading

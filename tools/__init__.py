@@ -7,3 +7,8 @@
     make_walkthrough  regenerate docs/img for docs/WALKTHROUGH.md
     roslive           a real roscore that can be crashed and restarted (tests, soak)
 """
+
+import os
+
+# numpy's BLAS one thread, as the node runs it (see kobuki_lane.py): set before numpy loads.
+os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
