@@ -5,8 +5,9 @@
               colours allowed on each side), as an arc through the robot; None when too
               little of it is seen, or the robot would be more than half a lane outside it
     predict   the last estimate moved with the robot's motion since (and a little less sure)
-    follows   whether a measurement can be the lane predicted: its heading at the robot within
-              a gate of the prediction's (ImprovedParams.turn_gate)
+    follows   whether a measurement can be the lane predicted: its heading at the robot, and
+              where it lies across, within gates of the prediction's (ImprovedParams.turn_gate,
+              shift_gate)
     blend     the prediction and the measurement weighed by the measurement's confidence
 
 The estimate is the centre line as y = a + b x + c x^2 about the robot (x ahead, y left): its
@@ -138,16 +139,23 @@ def predict(est, ds, dtheta):
                    confidence=est.confidence * FORGET, bend=bend)
 
 
-def follows(pred, meas, gate):
+def follows(pred, meas, gate, shift=0.0):
     """Whether the lane measured can be the lane predicted: turned at the robot no more than
-    `gate` [rad] from it (0: any lane can). The prediction has already turned the lane by the
-    robot's own turn and moved it along its curvature, so what is left is the estimate's error;
-    a lane turned much further is another line's: at a tight corner the next straight's lines
-    run across the view, and fitted as one lane through the robot they turned it by up to 80
-    degrees in one frame, at full confidence (gym-duckietown, small_loop seed 5 with domain
-    rand: predicted -3 degrees, measured +80). The controller counts such a frame as one with
-    no lane; once the estimate is stale (lost_timeout) a lane found replaces it."""
-    return not gate or abs(meas.heading - pred.heading) <= gate
+    `gate` [rad] from it, and moved across no more than `shift` [m] (0: either is off). The
+    prediction has already moved the lane by the robot's own motion, so what is left is the
+    estimate's error; a lane turned or moved much further is another line's:
+    - at a tight corner the next straight's lines run across the view, and fitted as one lane
+      through the robot they turned it by up to 80 degrees in one frame, at full confidence
+      (gym-duckietown, small_loop seed 5 with domain rand: predicted -3 degrees, measured +80);
+    - the robot moves across its lane a few centimetres a frame, so a lane found half a lane
+      width or more beside the one predicted lies nearer the next lane's centre than its own:
+      its lines are the neighbour's, or one line taken for the other (gym-duckietown with domain
+      rand, 40 episodes: the estimate jumped 0.2 to 0.3 m in one frame in four, all of which
+      failed, and at most 0.085 m in the others).
+    The controller counts such a frame as one with no lane; once the estimate is stale
+    (lost_timeout) a lane found replaces it."""
+    return ((not gate or abs(meas.heading - pred.heading) <= gate)
+            and (not shift or abs(meas.across - pred.across) <= shift))
 
 
 def blend(pred, meas, weight):

@@ -15,8 +15,9 @@ and here what to do with them (command). The estimate and the memory guide each 
 for the lane: the lines are sorted to left and right against the lane expected (the memory's
 centre line, else the prediction), and the lane found is pulled towards where the memory has it
 at the robot (lines seen far ahead place it there only through a long lever); a lane found
-turned at the robot more than `turn_gate` from the prediction is not the lane (estimate.follows;
-off by default, the duckiebot preset's 0.5 rad), and the frame counts as one without it; with
+turned at the robot more than `turn_gate` from the prediction, or further than `shift_gate`
+across from it, is not the lane (estimate.follows; off by default, the duckiebot preset's 0.5 rad
+and 0.5 lane widths), and the frame counts as one without it; with
 `bend_belief`, the search weighs each lane by how far its curvature lies from the prediction's.
 While the lane is seen the robot steers at the remembered centre line `memory_lookahead` ahead
 (else at the estimate, as near as it is seen); not seen, it follows the lane remembered round
@@ -124,6 +125,10 @@ class ImprovedParams:
                                'lane predicted there is not taken, and the frame counts as one '
                                'without a lane (estimate.follows); 0: off', 'rad',
                                between(0, math.pi))
+    shift_gate: float = setting(0.0, 'a lane found further than this across from the lane '
+                                'predicted (beside the robot) is not taken, and the frame '
+                                'counts as one without a lane (estimate.follows); 0: off',
+                                'lane widths', between(0, 10))
     bend_belief: float = setting(0.0, 'with a lane predicted, each lane found is weighed by '
                                  "how far its curvature lies from the prediction's, as a "
                                  'normal distribution this wide: a lane bent the other way is '
@@ -175,7 +180,7 @@ class ImprovedParams:
     # the settings given in lane widths (and lane widths per second): the Kobuki's numbers
     # divided by the lecture's 0.35 m lane, so that a narrower lane scales them all
     LANE_WIDTHS = ('roi_near', 'roi_far', 'v_max', 'v_min', 'curve_slowdown', 'lookahead',
-                   'lookahead_min', 'memory_lookahead', 'memory_window')
+                   'lookahead_min', 'memory_lookahead', 'memory_window', 'shift_gate')
 
     def in_metres(self, lane_width):
         """The same settings with those in lane widths in metres and m/s, for a lane
@@ -356,7 +361,7 @@ class ImprovedController:
         meas, fit = measure(pieces, self.profile, p, guide, anchor, self.held,
                             self.width if p.one_line_width == 'measured' else None, expected)
         self.mark('lane')
-        if meas is not None and current and not follows(prior, meas, p.turn_gate):
+        if meas is not None and current and not follows(prior, meas, p.turn_gate, p.shift_gate):
             meas, fit = None, None  # turned further than it can have turned since: not the lane
         self.sides = None if fit is None else fit.sides
         self.held = fit is not None and fit.predicted

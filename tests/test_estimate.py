@@ -581,3 +581,39 @@ def test_the_controller_carries_the_width_measured_into_frames_with_one_line(one
             assert abs(controller.estimate.offset) < 0.005
         else:  # the profile's width, not the one measured (the lane moves sideways)
             assert controller.estimate.width < w - 0.02
+
+
+def test_a_lane_found_half_a_lane_beside_the_prediction_is_no_lane_until_the_estimate_is_stale():
+    """The robot moves across its lane a few centimetres a frame: a lane found shift_gate lane
+    widths or more beside the one predicted (the neighbour's lines, or one line taken for the
+    other) is not taken, and the frame counts as one with no lane; a lane nearer is blended;
+    once the estimate is stale (lost_timeout) a lane beside is taken."""
+    w = DT.lane_width
+
+    def lane(across):  # the lane's centre `across` [m] to the robot's left, straight ahead
+        return frame(line_pieces(across + w / 2, 'yellow', dashed=True)
+                     + line_pieces(across - w / 2, 'white'))
+
+    def robot(**gate):
+        r = ImprovedController(LaneParams(), ImprovedParams(lane='duckietown', memory=0.0,
+                                                            **gate))
+        r(lane(0.0), 0.0)
+        assert abs(r.estimate.across) < 0.01 and r.lost_for == 0.0
+        return r
+
+    gated = robot(shift_gate=0.5)
+    assert gated.p.shift_gate == pytest.approx(0.5 * w)  # in lane widths, like the distances
+    gated(lane(w), 0.125)  # the next lane's lines a frame later: not the lane
+    assert gated.lost_for == pytest.approx(0.125) and gated.sides is None
+    assert abs(gated.estimate.across) < 0.01
+    gated(lane(0.2 * w), 0.25)  # 0.2 lane widths over: the lane, blended
+    assert gated.lost_for == 0.0 and 0.01 < gated.estimate.across < 0.2 * w
+    t = 0.25
+    while gated.lost_for <= 1.0:  # lost_timeout: the estimate is stale
+        t += 0.125
+        gated(lane(w), t)
+    gated(lane(0.7 * w), t + 0.125)  # (within REGAINED of it: the lane lost)
+    assert gated.lost_for == 0.0 and gated.estimate.across > 0.3 * w
+    ungated = robot()  # off, the default: the next lane's lines are blended at once
+    ungated(lane(w), 0.125)
+    assert ungated.lost_for == 0.0 and ungated.estimate.across > 0.3 * w
