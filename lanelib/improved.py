@@ -362,7 +362,7 @@ class ImprovedController:
                             self.width if p.one_line_width == 'measured' else None, expected)
         self.mark('lane')
         if meas is not None and current and not follows(prior, meas, p.turn_gate, p.shift_gate):
-            meas, fit = None, None  # turned further than it can have turned since: not the lane
+            meas, fit = None, None  # turned or moved further than it can have since: not the lane
         self.sides = None if fit is None else fit.sides
         self.held = fit is not None and fit.predicted
         # a lane found after one was lost must be the one lost (the robot cannot have left it
