@@ -37,6 +37,7 @@ import copy
 import math
 from dataclasses import dataclass, replace
 
+import cv2
 import numpy as np
 
 from lanelib.camera import LECTURE_CAMERA
@@ -107,6 +108,12 @@ class ImprovedParams:
                                      "correction: pitch_error_deg in the decision records); 0: "
                                      'the mounting as given, the lines parallel', 'deg',
                                      between(0, 30))
+    read_width: int = setting(0, 'frames wider than this are shrunk to this width (the height '
+                              'in proportion, the camera matrix with them) before they are '
+                              'read, and the pictures are drawn at that size: a quarter of the '
+                              "pixels at half the width, and a tape still several pixels wide "
+                              "at the floor band's far end; 0: as they come", 'px',
+                              non_negative)
     roi_near: float = setting(0.857, 'floor mask starts this far ahead (clipped to the view)',
                               'lane widths', positive)
     roi_far: float = setting(3.43, 'floor mask ends this far ahead', 'lane widths', positive)
@@ -280,6 +287,9 @@ class ImprovedController:
 
     def perceive(self, frame, keep_stages=False):
         h, w = frame.shape[:2]
+        if 0 < self.p.read_width < w:  # shrunk: the same camera read out at fewer pixels
+            w, h = self.p.read_width, max(1, round(h * self.p.read_width / w))
+            frame = cv2.resize(frame, (w, h), interpolation=cv2.INTER_AREA)
         if self.view is None or self.view.key != (id(self.camera), w, h):
             self.view = FloorView(self.camera, w, h, self.p)
         self.mark('start')

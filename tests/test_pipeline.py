@@ -156,3 +156,39 @@ def test_the_benchmark_times_the_improved_perception_with_the_lane_profile_asked
         assert controller.profile.name == lane
         assert set(controller.perceive(frame).masks[0]) == colours
         assert stages[:4] == ['start', 'undistort', 'colour', 'pieces']
+
+
+def test_a_frame_read_at_half_its_width_gives_the_same_lane():
+    # the duckiebot preset reads its camera's 640 x 480 frames at 320 x 240 (read_width): the
+    # camera matrix shrinks with them, so the lane on the floor is where the whole frame has it
+    import math
+    from dataclasses import replace
+
+    from lanelib.camera import CAMERAS
+    from lanelib.sim.tracks import load_track, with_world
+    from lanelib.sim.world import WORLDS, FloorCamera, FloorMap
+    from tools.bench import preset_settings
+
+    spec = with_world(load_track('s_bend'), WORLDS['duckietown'])
+    params, improved = preset_settings('duckiebot', spec)
+    assert improved.read_width == 320
+    camera = CAMERAS[spec.camera]
+    view = FloorCamera(camera, spec.mounting)
+    floor = FloorMap(spec.track, spec.gaps, spec.dashes)
+    rng = np.random.default_rng(0)
+    for s, offset, yaw in [(0.5, 0.03, 5.0), (0.8, -0.03, -6.0), (3.0, -0.02, 0.0)]:
+        frame = view.render(floor, spec.track.pose_at(s, offset, math.radians(yaw)),
+                            spec.scene, rng)
+        lanes = {}
+        for width in (0, 320, 1000):  # 1000: wider than the frame, which is read as it comes
+            controller = make_controller('improved', params, camera,
+                                         replace(improved, read_width=width))
+            controller(controller.perceive(frame))
+            lanes[width] = controller.estimate, controller.view.key[1:]  # the size read
+        (whole, seen), (half, shrunk), (same, as_is) = lanes[0], lanes[320], lanes[1000]
+        assert (seen, shrunk, as_is) == ((640, 480), (320, 240), (640, 480))
+        assert half.offset == pytest.approx(whole.offset, abs=0.005)
+        assert half.heading == pytest.approx(whole.heading, abs=math.radians(1))
+        assert half.curvature == pytest.approx(whole.curvature, abs=0.1)
+        assert (same.offset, same.heading) == (whole.offset, whole.heading)
+        assert abs(whole.offset + offset) < 0.03 or abs(whole.offset - offset) < 0.03
