@@ -153,7 +153,8 @@ def follows(pred, meas, gate, shift=0.0):
       rand, 40 episodes: the estimate jumped 0.2 to 0.3 m in one frame in four, all of which
       failed, and at most 0.085 m in the others).
     The controller counts such a frame as one with no lane; once the estimate is stale
-    (lost_timeout) a lane found replaces it."""
+    (lost_timeout) a lane found replaces it, and so it does while the estimate is only just
+    found (improved.CONFIRMED)."""
     return ((not gate or abs(meas.heading - pred.heading) <= gate)
             and (not shift or abs(meas.across - pred.across) <= shift))
 

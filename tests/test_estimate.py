@@ -13,7 +13,7 @@ from kobuki_lane import LaneParams
 from lanelib import lanefit
 from lanelib.colour import Piece
 from lanelib.estimate import LaneEstimate, blend, measure, predict
-from lanelib.improved import REGAINED, ImprovedController, ImprovedParams
+from lanelib.improved import CONFIRMED, REGAINED, ImprovedController, ImprovedParams
 from lanelib.lanefit import bent_distance, centre_path, robot_offset, signed_distance
 from lanelib.lanes import BUILTIN
 from lanelib.memory import LaneMemory, fit_centre
@@ -159,14 +159,16 @@ def test_a_lane_turned_further_than_it_can_have_turned_is_no_lane_until_the_esti
     assert math.radians(68) > gate > math.radians(10)
     robot = ImprovedController(LaneParams(), ImprovedParams(lane='duckietown', memory=0.0,
                                                             turn_gate=gate))
-    robot(lane(0), 0.0)
+    for k in range(CONFIRMED + 1):  # the lane found, and followed: the gate defends it
+        robot(lane(0), k * 0.125)
     assert abs(robot.estimate.heading) < 0.02 and robot.lost_for == 0.0
-    robot(lane(-68), 0.125)  # the lane 68 degrees to the right a frame later: not the lane
+    t = CONFIRMED * 0.125
+    robot(lane(-68), t + 0.125)  # the lane 68 degrees to the right a frame later: not the lane
     assert robot.lost_for == pytest.approx(0.125) and robot.sides is None
     assert abs(robot.estimate.heading) < 0.1  # the prediction, turned by the robot's own turn
-    robot(lane(-10), 0.25)  # 10 degrees: the lane, blended
+    robot(lane(-10), t + 0.25)  # 10 degrees: the lane, blended
     assert robot.lost_for == 0.0 and 0.02 < robot.estimate.heading < math.radians(10)
-    t = 0.25
+    t += 0.25
     while robot.lost_for <= 1.0:  # lost_timeout: the estimate is stale
         t += 0.125
         robot(lane(-68), t)
@@ -594,26 +596,57 @@ def test_a_lane_found_half_a_lane_beside_the_prediction_is_no_lane_until_the_est
         return frame(line_pieces(across + w / 2, 'yellow', dashed=True)
                      + line_pieces(across - w / 2, 'white'))
 
-    def robot(**gate):
+    def robot(**gate):  # the lane found, and followed for CONFIRMED frames
         r = ImprovedController(LaneParams(), ImprovedParams(lane='duckietown', memory=0.0,
                                                             **gate))
-        r(lane(0.0), 0.0)
+        for k in range(CONFIRMED + 1):
+            r(lane(0.0), k * 0.125)
         assert abs(r.estimate.across) < 0.01 and r.lost_for == 0.0
         return r
 
+    t = CONFIRMED * 0.125
     gated = robot(shift_gate=0.5)
     assert gated.p.shift_gate == pytest.approx(0.5 * w)  # in lane widths, like the distances
-    gated(lane(w), 0.125)  # the next lane's lines a frame later: not the lane
+    gated(lane(w), t + 0.125)  # the next lane's lines a frame later: not the lane
     assert gated.lost_for == pytest.approx(0.125) and gated.sides is None
     assert abs(gated.estimate.across) < 0.01
-    gated(lane(0.2 * w), 0.25)  # 0.2 lane widths over: the lane, blended
+    gated(lane(0.2 * w), t + 0.25)  # 0.2 lane widths over: the lane, blended
     assert gated.lost_for == 0.0 and 0.01 < gated.estimate.across < 0.2 * w
-    t = 0.25
+    t += 0.25
     while gated.lost_for <= 1.0:  # lost_timeout: the estimate is stale
         t += 0.125
         gated(lane(w), t)
     gated(lane(0.7 * w), t + 0.125)  # (within REGAINED of it: the lane lost)
     assert gated.lost_for == 0.0 and gated.estimate.across > 0.3 * w
     ungated = robot()  # off, the default: the next lane's lines are blended at once
-    ungated(lane(w), 0.125)
+    ungated(lane(w), CONFIRMED * 0.125 + 0.125)
     assert ungated.lost_for == 0.0 and ungated.estimate.across > 0.3 * w
+
+
+def test_a_lane_only_just_found_gives_way_to_the_lane_found_next():
+    """The gates defend a lane once CONFIRMED frames' lanes have followed it: a first frame (or
+    the first after driving blind) can take the wrong lines for the lane, and defended at once
+    it would refuse the true lane for a whole lost_timeout. Until then a lane found beyond the
+    gates replaces it; after, it is refused."""
+    w = DT.lane_width
+
+    def lane(across):  # the lane's centre `across` [m] to the robot's left, straight ahead
+        return frame(line_pieces(across + w / 2, 'yellow', dashed=True)
+                     + line_pieces(across - w / 2, 'white'))
+
+    robot = ImprovedController(LaneParams(), ImprovedParams(lane='duckietown', memory=0.0,
+                                                            shift_gate=0.5, turn_gate=0.5))
+    robot(lane(w), 0.0)  # the first frame's lane: the next lane's lines, taken for the robot's
+    assert robot.estimate.across > 0.8 * w and robot.confirmed == 0
+    robot(lane(0.0), 0.125)  # its own lane, beyond the shift gate: it replaces that one
+    # (blended, the estimate would have moved at most smoothing = 0.6 of the way: 0.6 w left)
+    assert robot.lost_for == 0.0 and robot.confirmed == 0 and robot.estimate.across < 0.45 * w
+    t = 0.125
+    for k in range(1, CONFIRMED + 1):  # followed, frame after frame
+        t += 0.125
+        robot(lane(0.0), t)
+        assert robot.lost_for == 0.0 and robot.confirmed == k
+    near = robot.estimate.across
+    assert abs(near) < 0.25 * w
+    robot(lane(w), t + 0.125)  # now confirmed: the next lane's lines are refused
+    assert robot.lost_for == pytest.approx(0.125) and abs(robot.estimate.across - near) < 0.02
