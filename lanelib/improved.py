@@ -298,12 +298,14 @@ class ImprovedController:
 
     def perceive(self, frame, keep_stages=False):
         h, w = frame.shape[:2]
-        if 0 < self.p.read_width < w:  # shrunk: the same camera read out at fewer pixels
+        shrink = 0 < self.p.read_width < w  # the same camera read out at fewer pixels
+        if shrink:
             w, h = self.p.read_width, max(1, round(h * self.p.read_width / w))
-            frame = cv2.resize(frame, (w, h), interpolation=cv2.INTER_AREA)
         if self.view is None or self.view.key != (id(self.camera), w, h):
             self.view = FloorView(self.camera, w, h, self.p)
-        self.mark('start')
+        self.mark('start')  # the shrinking is the frame's work, timed with the undistortion
+        if shrink:
+            frame = cv2.resize(frame, (w, h), interpolation=cv2.INTER_AREA)
         return perceive(frame, self.view, self.profile, self.p, self.piece_length, keep_stages,
                         self.mark, self.pitch_error)
 

@@ -103,6 +103,13 @@ def test_a_lane_found_after_one_was_lost_must_be_the_one_lost_but_a_first_lane_i
     assert seen.lost_for > 1.5  # still lost: not taken for the lane it lost
 
 
+def lane_beside(across):
+    """A straight Duckietown lane whose centre lies `across` [m] to the robot's left."""
+    w = DT.lane_width
+    return frame(line_pieces(across + w / 2, 'yellow', dashed=True)
+                 + line_pieces(across - w / 2, 'white'))
+
+
 def slanted_pieces(intercept, psi, colour, along=(0.1, 0.6), step=0.08):
     """Pieces of a straight line crossing the robot's sideways axis at `intercept` [m] and
     heading psi [rad] (+ left), over x from along[0] to along[1]."""
@@ -590,11 +597,7 @@ def test_a_lane_found_half_a_lane_beside_the_prediction_is_no_lane_until_the_est
     widths or more beside the one predicted (the neighbour's lines, or one line taken for the
     other) is not taken, and the frame counts as one with no lane; a lane nearer is blended;
     once the estimate is stale (lost_timeout) a lane beside is taken."""
-    w = DT.lane_width
-
-    def lane(across):  # the lane's centre `across` [m] to the robot's left, straight ahead
-        return frame(line_pieces(across + w / 2, 'yellow', dashed=True)
-                     + line_pieces(across - w / 2, 'white'))
+    w, lane = DT.lane_width, lane_beside
 
     def robot(**gate):  # the lane found, and followed for CONFIRMED frames
         r = ImprovedController(LaneParams(), ImprovedParams(lane='duckietown', memory=0.0,
@@ -628,11 +631,7 @@ def test_a_lane_only_just_found_gives_way_to_the_lane_found_next():
     the first after driving blind) can take the wrong lines for the lane, and defended at once
     it would refuse the true lane for a whole lost_timeout. Until then a lane found beyond the
     gates replaces it; after, it is refused."""
-    w = DT.lane_width
-
-    def lane(across):  # the lane's centre `across` [m] to the robot's left, straight ahead
-        return frame(line_pieces(across + w / 2, 'yellow', dashed=True)
-                     + line_pieces(across - w / 2, 'white'))
+    w, lane = DT.lane_width, lane_beside
 
     robot = ImprovedController(LaneParams(), ImprovedParams(lane='duckietown', memory=0.0,
                                                             shift_gate=0.5, turn_gate=0.5))
