@@ -8,7 +8,8 @@ Each frame, in the order the data flows, a module each:
     estimate   lanelib/estimate.py: the lane predicted from the last frames with the robot's
                motion, the robot's own lane found among the lines in view, the two blended
     memory     lanelib/memory.py: the centre line seen in the last seconds, moved with the robot
-    steer      lanelib/steering.py: one law, at the centre line a look-ahead away
+    steer      lanelib/steering.py: one law, at the centre line a look-ahead away (the middle of
+               the floor between the tapes: ImprovedController.shift)
     pictures   lanelib/lanedraw.py: what it saw and decided, drawn
 
 and here what to do with them (command). The estimate and the memory guide each frame's search
@@ -248,6 +249,11 @@ class ImprovedController:
         # the widest tape is wide, so that a piece's direction is along the line
         self.piece_length = max(0.25 * self.p.lane_width,
                                 3 * max(self.profile.left.width, self.profile.right.width))
+        # the robot drives along the middle of the floor between the tapes, not between their
+        # centres: with a wider tape on the right (Duckietown's white, 5 cm, against the yellow's
+        # 2.5) that lies this far [m] to the left of the centre line the lines are fitted with,
+        # as dt-core's lane filter reads the lane (its offset is to the tapes' inner edges)
+        self.shift = (self.profile.right.width - self.profile.left.width) / 4
         self.camera = camera
         self.odometry = odometry
         self.dt = 1.0 / lane_params.rate
@@ -440,9 +446,11 @@ class ImprovedController:
         arc, (x, y) = found
         if abs(arc[0]) > TRUSTED * w:
             return None
-        ax, ay, _ = LaneFit(arc, None, 0, 0, None).point_at(p.memory_lookahead)
+        ax, ay, heading = LaneFit(arc, None, 0, 0, None).point_at(p.memory_lookahead)
         if ax <= 0 or np.min(np.hypot(x - ax, y - ay)) > NEAR_TARGET * w:
             return None
+        if self.shift:  # the point `shift` to the left of the centre line (__init__)
+            ax, ay = ax - self.shift * math.sin(heading), ay + self.shift * math.cos(heading)
         return steer(ax, ay, 0.0, self.estimate.confidence, p, alpha=1.0)
 
     def remembered(self):
@@ -455,14 +463,21 @@ class ImprovedController:
         if coef is None:
             return None
         a, b, c = coef
-        return steer(L, a + b * L + c * L ** 2, b + 2 * c * L, self.estimate.confidence, p)
+        return self.steer(L, a + b * L + c * L ** 2, b + 2 * c * L, self.estimate.confidence)
 
     def seen(self):
         """(linear.x, angular.z) at the estimate's centre line, as near as it is seen, between
         lookahead_min and lookahead."""
         e, p = self.estimate, self.p
         x = float(np.clip(e.reach, p.lookahead_min, p.lookahead))
-        return steer(x, e.a + e.b * x + e.c * x ** 2, e.b + 2 * e.c * x, e.confidence, p)
+        return self.steer(x, e.a + e.b * x + e.c * x ** 2, e.b + 2 * e.c * x, e.confidence)
+
+    def steer(self, x, y, slope, confidence):
+        """steering.steer at the point of the centre line (x, y) with `slope` there, moved
+        `shift` to its left (the middle of the floor between the tapes)."""
+        if self.shift:
+            y += self.shift * math.hypot(1.0, slope)  # the parallel line, at the same x
+        return steer(x, y, slope, confidence, self.p)
 
     def command(self):
         """What to do with the estimate (module doc)."""

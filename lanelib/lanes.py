@@ -1,7 +1,9 @@
 """Lane profiles: what the lines of the robot's lane look like (--lane NAME or a YAML file).
 
 A profile gives the lane width between the two lines' centres and, for each side, the line's
-colour (white, yellow, or any), whether it is solid or dashed, and the tape's width. Where a
+colour (white, yellow, or any), whether it is solid or dashed, and the tape's width (with tapes of
+two widths the improved controller drives along the middle of the floor between them, a quarter
+of the difference off the middle between their centres). Where a
 side names a colour, the improved controller counts a line on that side only where the colour
 says so, and a line of the other colour, or a line on the wrong side of it, is not its lane's.
 A colour only dashed lines have is looked for in short pieces: a dash need only be a little
