@@ -660,8 +660,9 @@ def test_the_robot_drives_along_the_middle_of_the_floor_between_the_tapes(lane):
     two are one."""
     p = ImprovedParams(lane=lane, memory=0.0)
     ctl = ImprovedController(LaneParams(), p)
-    shift = (BUILTIN[lane].right.width - BUILTIN[lane].left.width) / 4
-    assert ctl.shift == pytest.approx(shift) and (shift > 0.006) == (lane == 'duckietown')
+    # (5 cm white - 2.5 cm yellow) / 4; the lecture's tapes are both 3 cm
+    assert ctl.shift == pytest.approx({'duckietown': 0.00625, 'lecture': 0.0}[lane], abs=1e-12)
+    shift = ctl.shift
     ctl.estimate = LaneEstimate(a=-shift, b=0.0, c=0.0, confidence=1.0)  # the robot there
     assert ctl.seen()[1] == pytest.approx(0.0, abs=1e-12)
     ctl.estimate = LaneEstimate(a=0.0, b=0.0, c=0.0, confidence=1.0)  # between the centres
