@@ -152,6 +152,13 @@ class ImprovedParams:
                                  'normal distribution this wide: a lane bent the other way is '
                                  'not taken for the longer line it rests on (lanefit.find_lane); '
                                  '0: off', '1/lane width', between(0, 10))
+    start_belief: str = setting('none', 'where the lane is expected until the first lane is '
+                                f"confirmed (found in {CONFIRMED} frames running): 'none' "
+                                "(wherever the pieces put it) or 'centred' (its centre under the "
+                                "robot, running along the robot's heading, where a robot is set "
+                                'down: each lane found is pulled a little towards that, and of '
+                                'lanes the pieces support about as well, the nearer is taken, '
+                                'as with a lane predicted)', choices=('none', 'centred'))
     lost_timeout: float = setting(1.0, 'the lane unseen this long: lost (the robot follows the '
                                   'lane remembered while it lasts, then searches, then stops)',
                                   's', positive)
@@ -260,6 +267,7 @@ class ImprovedController:
         self.view = None  # the FloorView of the frames' size
         self.cluttered = False  # the last frame had more than max_pieces pieces of line
         self.ever_seen = False  # a lane has been seen since the start (reset() keeps it)
+        self.placed = False  # a lane has been confirmed since the start (reset() keeps it)
         self.width = None  # [m] between the lines, last measured with both in view
         # [deg] the camera looks this much further down than the mounting says, as the lane's
         # lines say (pitch_tolerance); a property of the camera, so kept when the lane is lost
@@ -384,6 +392,10 @@ class ImprovedController:
         if self.pitch_error != made:
             pieces = repitched_pieces(pieces, p.mounting.looking_down(made),
                                       self.pitch_error - made)
+        if p.start_belief == 'centred' and not self.placed:
+            # before its first lane, the robot stands where it was set down: in its lane and
+            # along it, as dt-core's lane filter starts its belief (offset 0, heading 0)
+            anchor = (0.0, 0.0)
         blind = self.lost_for > p.lost_timeout  # the estimate from before is stale
         current = prior is not None and not blind  # the prediction stands for this frame
         expected = (prior.curvature, p.bend_belief / w) if p.bend_belief and current else None
@@ -409,6 +421,7 @@ class ImprovedController:
                     self.learn_pitch(meas)
             self.lost_for, self.search = 0.0, None
             self.confirmed = self.confirmed + 1 if current else 0
+            self.placed = self.placed or self.confirmed >= CONFIRMED
             self.estimate = (blend(prior, meas, p.smoothing * meas.confidence) if current
                              else meas)
         else:

@@ -218,6 +218,45 @@ def test_with_bend_belief_the_search_weighs_lanes_by_the_curvature_predicted(mon
     assert given == [None, None]
 
 
+def test_a_start_belief_expects_the_first_lane_under_the_robot_until_one_is_confirmed(
+        monkeypatch):
+    """start_belief 'centred': until a lane has been found in CONFIRMED frames running, each
+    frame's search expects the lane where a robot is set down, its centre under the robot and
+    along its heading (find_lane's anchor (0, 0)), and the first lane found is pulled towards
+    it; from then on (reset() or not) the lane predicted. With 'none', no anchor but the
+    prediction's."""
+    import lanelib.estimate as estimate
+    given = []
+    real = estimate.find_lane
+    monkeypatch.setattr(estimate, 'find_lane',
+                        lambda *a, **k: given.append(k['anchor']) or real(*a, **k))
+    w = DT.lane_width
+    beside = lane_beside(-0.3 * w)  # the robot 0.3 lane widths left of its lane's centre
+
+    def started(belief):
+        robot = ImprovedController(LaneParams(), ImprovedParams(lane='duckietown', memory=0.0,
+                                                                start_belief=belief))
+        robot(frame([]), 0.0)  # nothing in view: still unplaced
+        firsts = []
+        for k in range(1, CONFIRMED + 3):
+            robot(beside, k * 0.125)
+            firsts.append(robot.estimate.across)
+        return robot, firsts
+
+    robot, firsts = started('centred')
+    assert given == [(0.0, 0.0)] * (CONFIRMED + 2) + [None]
+    assert robot.placed and robot.confirmed == CONFIRMED + 1
+    robot.reset()
+    given.clear()
+    robot(beside, 10.0)
+    assert given == [None]  # placed once: a lane lost later is searched for as before
+    given.clear()
+    free, free_firsts = started('none')
+    assert given == [None] * (CONFIRMED + 3)
+    assert free_firsts[0] == pytest.approx(-0.3 * w, abs=0.005)
+    assert -0.25 * w < firsts[0] < -0.05 * w  # pulled towards the robot, not onto it
+
+
 def test_latency_steers_on_the_lane_where_it_will_be_when_the_command_acts():
     """With `latency`, the command is the one for the lane moved on by the last command for
     that long (predict), and the estimate kept is the one measured; 0 steers on it as it is."""
