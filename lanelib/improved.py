@@ -156,9 +156,9 @@ class ImprovedParams:
                                 f"confirmed (found in {CONFIRMED} frames running): 'none' "
                                 "(wherever the pieces put it) or 'centred' (its centre under the "
                                 "robot, running along the robot's heading, where a robot is set "
-                                'down: each lane found is pulled a little towards that, and of '
-                                'lanes the pieces support about as well, the nearer is taken, '
-                                'as with a lane predicted)', choices=('none', 'centred'))
+                                'down: each lane found is pulled a little towards that, and '
+                                'lanes found far beside it are weighed down, as later with the '
+                                'lane predicted)', choices=('none', 'centred'))
     lost_timeout: float = setting(1.0, 'the lane unseen this long: lost (the robot follows the '
                                   'lane remembered while it lasts, then searches, then stops)',
                                   's', positive)
