@@ -590,6 +590,28 @@ def test_soak_counts_commands_inside_fault_intervals():
     assert turned == pytest.approx(math.degrees(1.5 * 0.25), abs=0.1)
 
 
+def test_a_master_is_back_when_the_nodes_watch_hears_it_even_before_the_restart_sees_it():
+    """CI, 2026-11-28: the node's watch heard the restarted master 11 ms before the restart's
+    own check (which also looks for the process) returned; the node resumed and a move
+    published in between was counted as one made while the master was gone."""
+    from types import SimpleNamespace
+
+    from tools import soak
+
+    world = SimpleNamespace(outages=[[10.0, 13.04], [30.0, 33.0]])
+    # the watch heard a master before the kill, then 13.02 s; it had not heard the second
+    watch = SimpleNamespace(period=1.0, timeout=1.0, answered=[9.0, 13.02, 29.5])
+    assert soak.master_outages(world, watch) == [[10.0, 13.02], [30.0, 33.0]]
+    commands = [(11.5, 0.2, 0.0), (12.5, 0.2, 0.0), (13.03, 0.2, 0.0), (32.5, 0.0, 0.4),
+                (33.5, 0.2, 0.0)]
+    source = SimpleNamespace(commands=commands, outages=[], covered=[])
+    received = [(t, x, z) for t, x, z in commands]
+    figures = soak.master_figures(world, source, received, watch)
+    assert figures['moving_while_master_lost'] == 2  # 12.5 and 32.5; not 13.03
+    assert figures['moving_within_master_watch'] == 1  # 11.5, before the watch could notice
+    assert figures['driving_again_after_master_s']['max'] == pytest.approx(0.5)  # 33 -> 33.5
+
+
 def test_the_plots_title_has_a_band_of_its_own_above_the_track():
     """Issue 16: the stats line of --plot was written over the track."""
     from lanelib.sim.simulator import TopDown

@@ -321,6 +321,28 @@ class RealRos:
         return received
 
 
+class TimedWatch(MasterWatch):
+    """The node's master watch, unchanged, noting when the master answered it (wall time)."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.answered = []
+
+    def alive(self):
+        answers = super().alive()
+        if answers:
+            self.answered.append(time.time())
+        return answers
+
+
+def master_outages(world, watch):
+    """[killed at, answering again at] for each restart. The restart's own check sees the new
+    master late (it also looks for its process); when the node's watch heard it first, the
+    master was back by then, and a move after that is not one made while it was gone."""
+    return [[killed, min([back] + [t for t in watch.answered if t > killed])]
+            for killed, back in world.outages]
+
+
 def master_figures(world, source, received, watch):
     """What the subscriber got, and how the node behaved while the master was gone.
 
@@ -329,9 +351,10 @@ def master_figures(world, source, received, watch):
     first move; those restarts are counted apart."""
     commands = source.commands
     grace = watch.period + watch.timeout  # the master watch notices within this
+    outages = master_outages(world, watch)
     back_to_driving, other_fault = [], 0
-    for i, (_, back) in enumerate(world.outages):
-        later = world.outages[i + 1][0] if i + 1 < len(world.outages) else math.inf
+    for i, (_, back) in enumerate(outages):
+        later = outages[i + 1][0] if i + 1 < len(outages) else math.inf
         moves = [t for t, x, z in commands if back < t < later and (x != 0.0 or z != 0.0)]
         if not moves:
             continue
@@ -341,11 +364,11 @@ def master_figures(world, source, received, watch):
         back_to_driving.append(moves[0] - back)
     times = np.array([t for t, _, _ in received])
     return dict(
-        master_restarts=len(world.outages),
-        master_down_s=round(sum(b - a for a, b in world.outages), 1),
-        moving_while_master_lost=moving(commands, world.outages, grace),
-        moving_within_master_watch=(moving(commands, world.outages) -
-                                    moving(commands, world.outages, grace)),
+        master_restarts=len(outages),
+        master_down_s=round(sum(b - a for a, b in outages), 1),
+        moving_while_master_lost=moving(commands, outages, grace),
+        moving_within_master_watch=(moving(commands, outages) -
+                                    moving(commands, outages, grace)),
         driving_again_after_master_s=dict(
             median=round(float(np.median(back_to_driving)), 2) if back_to_driving else None,
             max=round(max(back_to_driving), 2) if back_to_driving else None,
@@ -384,7 +407,7 @@ def soak(track='oval', controller='improved', frames=10000, seed=0, progress=Tru
         if handle_signals:  # Ctrl-C ends the soak with the robot stopped and its figures
             install_signal_handlers(follower.request_stop)
         if real_ros:
-            watch = MasterWatch(base, ros).start()
+            watch = TimedWatch(base, ros).start()
         started = ros.get_time()
         ended = follower.run(10.0 if real_ros else 0.0)
         elapsed = ros.get_time() - started
