@@ -159,6 +159,17 @@ class ImprovedParams:
                                 'down: each lane found is pulled a little towards that, and '
                                 'lanes found far beside it are weighed down, as later with the '
                                 'lane predicted)', choices=('none', 'centred'))
+    memory_anchor: str = setting('parabola', 'how the lane at the robot (which each frame\'s '
+                                 'search is pulled towards) is read from the memory: '
+                                 "'parabola' (the centre line as a parabola in the distance "
+                                 f'ahead, fitted {ANCHOR[0]:g} to {ANCHOR[1]:g} lane widths '
+                                 "ahead, its points' distances taken across the robot's "
+                                 "heading) or 'line' (the straight line nearest the points "
+                                 f'within {ANCHOR[1]:g} lane widths of the robot, distances '
+                                 'taken square to it: where the lane runs across the view, '
+                                 "in a corner tighter than that, those points' distances "
+                                 "across the robot's heading are long and pull the parabola "
+                                 'aside)', choices=('parabola', 'line'))
     lost_timeout: float = setting(1.0, 'the lane unseen this long: lost (the robot follows the '
                                   'lane remembered while it lasts, then searches, then stops)',
                                   's', positive)
@@ -371,9 +382,7 @@ class ImprovedController:
             remembered = self.memory.centre_line(*(v * w for v in GUIDE))
             if remembered is not None and prior is not None:
                 guide = replace(prior, a=remembered[0], b=remembered[1], c=remembered[2]).arc
-            under = self.memory.centre_line(*(v * w for v in ANCHOR))  # no lever
-            if under is not None:
-                anchor = (under[0], math.atan(under[1]))
+            anchor = self.anchored()
             if prior is not None and self.lost_for > p.lost_timeout:
                 found = self.memory.arc(prior.arc, FOLLOW * w, ARC_OUTLIER * w)  # even a U-turn
                 if found is not None:
@@ -436,6 +445,16 @@ class ImprovedController:
         self.last = (command.linear_x, command.angular_z)
         self.mark('steer')
         return command
+
+    def anchored(self):
+        """(offset [m], heading [rad]) of the lane at the robot as the memory has it, from the
+        points about the robot (no lever), or None where too little is remembered there
+        (memory_anchor)."""
+        w = self.p.lane_width
+        if self.p.memory_anchor == 'line':
+            return self.memory.line_about(ANCHOR[1] * w, ANCHOR[2] * w)
+        under = self.memory.centre_line(*(v * w for v in ANCHOR))
+        return None if under is None else (under[0], math.atan(under[1]))
 
     def learn_pitch(self, meas):
         """The pitch correction from a frame with both lines in view: lines parallel on the

@@ -23,6 +23,8 @@ from lanelib.lanefit import fit_lanes, signed_distance
 from lanelib.robot import arc_step
 
 ENOUGH = 6  # points: fewer remembered in a stretch say nothing of it
+ACROSS = math.cos(1.4)  # a line turned more than 1.4 rad (lanefit's HEADING_LIMIT) from the
+# robot's heading has no offset at the robot worth the name
 
 
 class LaneMemory:
@@ -96,6 +98,28 @@ class LaneMemory:
                 break
             coef = fit_centre(x[keep], y[keep], w[keep], x0=middle)
         return coef
+
+    def line_about(self, reach, min_span):
+        """(offset [m], heading [rad]) at the robot of the straight line nearest the remembered
+        points within `reach` metres of the robot, each point's distance taken square to the
+        line: their weighted principal axis, through their weighted mean. None with fewer than
+        ENOUGH points there, spanning less than min_span along the line, or a line running
+        across the robot's heading (which crosses its sideways axis nowhere near). Unlike
+        centre_line's, whose distances are taken across the robot's heading, a part of the lane
+        that runs across the view (a tight corner's way out) weighs no more than its length."""
+        x, y, w = self.local()
+        keep = np.hypot(x, y) < reach
+        if np.count_nonzero(keep) < ENOUGH:
+            return None
+        x, y, w = x[keep], y[keep], w[keep]
+        total = w.sum()
+        dx, dy = x - (w @ x) / total, y - (w @ y) / total
+        angle = 0.5 * math.atan2(2 * float(w @ (dx * dy)), float(w @ (dx * dx) - w @ (dy * dy)))
+        c, s = math.cos(angle), math.sin(angle)  # c >= 0: along the line, ahead
+        along = dx * c + dy * s
+        if c < ACROSS or np.ptp(along) < min_span:
+            return None
+        return float((w @ y) / total - (w @ x) / total * s / c), angle
 
     def arc(self, start, reach, outlier):
         """The remembered centre line within `reach` metres of the robot as an arc (e, psi, k)

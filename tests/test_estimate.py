@@ -13,7 +13,7 @@ from kobuki_lane import LaneParams
 from lanelib import lanefit
 from lanelib.colour import Piece
 from lanelib.estimate import LaneEstimate, blend, measure, predict
-from lanelib.improved import CONFIRMED, REGAINED, ImprovedController, ImprovedParams
+from lanelib.improved import ANCHOR, CONFIRMED, REGAINED, ImprovedController, ImprovedParams
 from lanelib.lanefit import bent_distance, centre_path, robot_offset, signed_distance
 from lanelib.lanes import BUILTIN
 from lanelib.memory import LaneMemory, fit_centre
@@ -539,6 +539,53 @@ def test_the_memory_fits_the_centre_line_ahead_and_an_arc_round_a_u_turn():
     arc, _ = memory.arc((0.0, 0.0, 1.5), 1.0, 0.06)  # from the bend as estimated
     assert arc[2] == pytest.approx(1 / r, rel=0.05) and abs(arc[0]) < 0.01
     assert memory.centre_line(2.0, 3.0, 0.1) is None  # nothing remembered there
+
+
+def test_the_line_about_the_robot_takes_distances_square_to_it():
+    """LaneMemory.line_about (memory_anchor 'line'): the weighted principal axis of the points
+    within reach, as (offset at the robot, heading). On a lane turned 0.9 rad, its points
+    1.2 cm either side of it, it is the lane; the parabola's distances, taken across the
+    robot's heading, flatten it (what a corner's way out, running across the view, does to
+    the lane at the robot)."""
+    memory = LaneMemory(10.0)
+    e, psi = -0.02, 0.9
+    t = np.linspace(-0.12, 0.3, 60)
+    side = np.where(np.arange(t.size) % 2, 0.012, -0.012)
+    memory.add(t * math.cos(psi) - side * math.sin(psi),
+               e + t * math.sin(psi) + side * math.cos(psi), np.ones_like(t))
+    far = np.linspace(0.5, 0.8, 10)  # beyond reach: not used
+    memory.add(far, np.full_like(far, 0.5), np.ones_like(far))
+    offset, heading = memory.line_about(0.27, 0.1)
+    assert offset == pytest.approx(e, abs=0.001) and heading == pytest.approx(psi, abs=0.001)
+    a, b, _ = memory.centre_line(-0.135, 0.27, 0.135)
+    assert psi - math.atan(b) > 0.01
+    assert memory.line_about(0.27, 0.5) is None  # spans less than that along the line
+    assert memory.line_about(0.015, 0.001) is None  # fewer than ENOUGH points within reach
+    across = LaneMemory(10.0)  # a line across the robot's heading has no offset at the robot
+    across.add(np.full(20, 0.1), np.linspace(-0.1, 0.1, 20), np.ones(20))
+    assert across.line_about(0.27, 0.1) is None
+
+
+def test_the_memory_anchor_reads_the_lane_at_the_robot_with_the_model_asked_for():
+    """memory_anchor: the anchor is centre_line's parabola (offset, atan of its slope) or
+    line_about's line, from the points about the robot (ANCHOR)."""
+    w = DT.lane_width
+    x = np.linspace(-0.5 * w, 1.1 * w, 40)
+    y = -0.1 * w + 0.3 * x + 0.4 * x ** 2
+    for model in ('parabola', 'line'):
+        robot = ImprovedController(LaneParams(), ImprovedParams(lane='duckietown',
+                                                                memory_anchor=model))
+        robot.memory.add(x, y, np.ones_like(x))
+        memory = robot.memory
+        if model == 'line':
+            expected = memory.line_about(ANCHOR[1] * w, ANCHOR[2] * w)
+        else:
+            a, b, _ = memory.centre_line(*(v * w for v in ANCHOR))
+            expected = (a, math.atan(b))
+        assert robot.anchored() == pytest.approx(expected, abs=1e-12)
+    empty = ImprovedController(LaneParams(), ImprovedParams(lane='duckietown',
+                                                            memory_anchor='line'))
+    assert empty.anchored() is None
 
 
 def test_the_centre_fit_is_the_ridged_least_squares_parabola():
