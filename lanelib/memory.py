@@ -10,6 +10,8 @@ camera has lost sight of, are steered on as they are:
     centre_line(near, far)   the remembered centre line between near and far metres ahead, as
                              y = a + b x + c x^2: where the lane lies about the robot (the
                              estimate's anchor) and at the look-ahead (what the robot steers at)
+    line_about(reach)        the straight line nearest the remembered points about the robot,
+                             distances square to it: the anchor with memory_anchor 'line'
     arc(start)               the remembered centre line within a metre, as an arc through the
                              robot: it can turn any angle (what the robot follows when the lane
                              is out of view)
