@@ -612,6 +612,16 @@ def test_a_master_is_back_when_the_nodes_watch_hears_it_even_before_the_restart_
     assert figures['driving_again_after_master_s']['max'] == pytest.approx(0.5)  # 33 -> 33.5
 
 
+def test_the_soaks_watch_notes_when_it_asked_each_question_the_master_answered(monkeypatch):
+    from tools import soak
+
+    replies = iter([True, False, True])
+    monkeypatch.setattr(soak.MasterWatch, 'alive', lambda self: next(replies))
+    watch = soak.TimedWatch(None, None, clock=iter([5.0, 6.0, 7.0]).__next__)
+    assert [watch.alive() for _ in range(3)] == [True, False, True]
+    assert watch.answered == [5.0, 7.0]  # asked at 5 and 7; at 6 no answer
+
+
 def test_the_plots_title_has_a_band_of_its_own_above_the_track():
     """Issue 16: the stats line of --plot was written over the track."""
     from lanelib.sim.simulator import TopDown

@@ -322,23 +322,27 @@ class RealRos:
 
 
 class TimedWatch(MasterWatch):
-    """The node's master watch, unchanged, noting when the master answered it (wall time)."""
+    """The node's master watch, unchanged, noting when it asked each question the master
+    answered (wall time): a question asked after a kill and answered proves the new master (an
+    answer received late to one asked before the kill proves nothing, so the asking is timed)."""
 
-    def __init__(self, *args, **kwargs):
+    def __init__(self, *args, clock=time.time, **kwargs):
         super().__init__(*args, **kwargs)
-        self.answered = []
+        self.clock, self.answered = clock, []
 
     def alive(self):
+        asked = self.clock()
         answers = super().alive()
         if answers:
-            self.answered.append(time.time())
+            self.answered.append(asked)
         return answers
 
 
 def master_outages(world, watch):
     """[killed at, answering again at] for each restart. The restart's own check sees the new
     master late (it also looks for its process); when the node's watch heard it first, the
-    master was back by then, and a move after that is not one made while it was gone."""
+    master was back by then (by the time the watch asked, within a round trip), and a move
+    after that is not one made while it was gone."""
     return [[killed, min([back] + [t for t in watch.answered if t > killed])]
             for killed, back in world.outages]
 
