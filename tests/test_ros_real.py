@@ -39,9 +39,17 @@ def start_node_on_samples(roscore):
                             text=True)
 
 
-def assert_matches_decisions(messages, records):
-    """One Twist per frame with the rule's values, in order, then a final zero."""
-    assert len(messages) == len(records) + 1, (len(messages), len(records))
+# How long a node under test waits for the test's subscriber before it publishes: it goes on
+# at once when the subscriber connects, and a loaded machine (CI) has taken more than 5 s to
+# connect it (all eight commands went to nobody, and the connection, arriving as the node shut
+# down, was reset).
+SUBSCRIBER_WAIT = '30'
+
+
+def assert_matches_decisions(messages, records, log=''):
+    """One Twist per frame with the rule's values, in order, then a final zero. `log`: the
+    node's output, shown if they do not match."""
+    assert len(messages) == len(records) + 1, (len(messages), len(records), log[-3000:])
     for (_, x, z), rec in zip(messages, records):
         assert abs(x - rec['linear_x']) < 1e-9 and abs(z - rec['angular_z']) < 1e-9
     _, x, z = messages[-1]
@@ -51,12 +59,13 @@ def assert_matches_decisions(messages, records):
 def test_node_publishes_the_rule_at_4hz_and_ends_with_a_stop(roscore, twist_recorder,
                                                              few_frames, tmp_path):
     decisions = tmp_path / 'd.jsonl'
-    proc = run_node(roscore, ['--source', str(few_frames), '--decisions', str(decisions)])
+    proc = run_node(roscore, ['--source', str(few_frames), '--decisions', str(decisions),
+                              '--wait-for-base', SUBSCRIBER_WAIT])
     assert proc.returncode == 0, proc.stderr
     records = read_jsonl(decisions)
     assert len(records) == 8
     messages = twist_recorder.wait_for(len(records) + 1, timeout=5)
-    assert_matches_decisions(messages, records)
+    assert_matches_decisions(messages, records, proc.stderr)
     # frame commands arrive at the loop rate: 4 Hz, within 10 %
     times = [t for t, _, _ in messages[:-1]]
     rate = (len(times) - 1) / (times[-1] - times[0])
@@ -123,12 +132,12 @@ def test_roslaunch_starts_the_node_with_its_launch_parameters(roscore, twist_rec
     params = tmp_path / 'params.yaml'
     params.write_text('threshold: 0.5\nturn_angular: 0.3\n')
     proc = roslaunch(roscore, tmp_path, few_frames, f'params:={params}',
-                     extra=f'--decisions {decisions} --wait-for-base 5')
+                     extra=f'--decisions {decisions} --wait-for-base {SUBSCRIBER_WAIT}')
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     records = read_jsonl(decisions)
     assert len(records) == 8
     messages = twist_recorder.wait_for(len(records) + 1, timeout=5)
-    assert_matches_decisions(messages, records)
+    assert_matches_decisions(messages, records, proc.stdout + proc.stderr)
     turns = [r for r in records if r['decision'] in ('left', 'right')]
     assert turns, 'threshold 0.5 from the launch file should make some frames turn'
     for r in records:
