@@ -40,9 +40,9 @@ def start_node_on_samples(roscore):
 
 
 # How long a node under test waits for the test's subscriber before it publishes: it goes on
-# at once when the subscriber connects, and a loaded machine (CI) has taken more than 5 s to
-# connect it (all eight commands went to nobody, and the connection, arriving as the node shut
-# down, was reset).
+# at once when the subscriber connects. With 5 s, one CI run's subscriber got none of the eight
+# commands: its only connection attempt was reset in the handshake, as when it reaches a node
+# that is closing, after the node had waited, published to nobody and ended.
 SUBSCRIBER_WAIT = '30'
 
 
