@@ -115,13 +115,14 @@ class LaneMemory:
             return None
         x, y, w = x[keep], y[keep], w[keep]
         total = w.sum()
-        dx, dy = x - (w @ x) / total, y - (w @ y) / total
+        mx, my = (w @ x) / total, (w @ y) / total  # the weighted mean: the line runs through it
+        dx, dy = x - mx, y - my
         angle = 0.5 * math.atan2(2 * float(w @ (dx * dy)), float(w @ (dx * dx) - w @ (dy * dy)))
         c, s = math.cos(angle), math.sin(angle)  # c >= 0: along the line, ahead
         along = dx * c + dy * s
         if c < ACROSS or np.ptp(along) < min_span:
             return None
-        return float((w @ y) / total - (w @ x) / total * s / c), angle
+        return float(my - mx * s / c), angle
 
     def arc(self, start, reach, outlier):
         """The remembered centre line within `reach` metres of the robot as an arc (e, psi, k)
