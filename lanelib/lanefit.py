@@ -55,6 +55,8 @@ BEND_FLOOR = 0.01  # [lane widths] one arc as near its points as this (RMS) need
 # among lanes a camera could see
 HEADING_LIMIT = 1.4  # [rad]
 CURVATURE_LIMIT = 30.0  # [1/m]
+SETTLED = 1e-12  # a Gauss-Newton fit whose last step moved nothing more than this has settled:
+# fitted again to the same points on the same sides, it stays where it is
 TIE = 1e-6  # lanes scored within this fraction of the best are equally supported (rounding)
 
 
@@ -174,16 +176,15 @@ def _distances(x, y, arcs, jacobian=False, out=None):
     return _distance(x, y, e, psi, k, jacobian, out)
 
 
-def fit_lanes(x, y, sides, w, lanes, priors, limits, iterations=ITERATIONS, first=None):
+def fit_lanes(x, y, sides, w, lanes, priors, limits, iterations=ITERATIONS, last_step=None):
     """Weighted least squares of the points' distances from their lines, for S lanes at once:
     x, y (N,) points; sides (S, N) each point's line (+1 left, -1 right, 0 neither), w (S, N)
     their weights; lanes (S, 4) the starts (e, psi, k, width), a point on side s lying
     s * width / 2 from the centre arc, or (S, 5) (e, psi, k, width, spread), s * (width +
     spread x) / 2 (_halves). priors: (weights, target), each of the lanes' length: each
     parameter pulled towards its target with that weight; limits: the width's bounds (equal:
-    held there), and with a spread its bound (+-; 0: held). first: (distances (S, N), their
-    derivatives (S, N, 3)) at the starts, when the caller has them (_distances with jacobian).
-    Gauss-Newton."""
+    held there), and with a spread its bound (+-; 0: held). last_step: an (S,) array, when
+    given, gets each lane's largest change in its last step. Gauss-Newton."""
     lanes = lanes.astype(float).copy()
     n = lanes.shape[1]
     pull, target = (np.asarray(v, float) for v in priors)
@@ -202,16 +203,16 @@ def fit_lanes(x, y, sides, w, lanes, priors, limits, iterations=ITERATIONS, firs
         high.append(limits[2])
     low, high = np.array(low), np.array(high)
     pulled = np.diag(pull)
-    for i in range(iterations):
-        if i == 0 and first is not None:
-            d, jac[..., :3] = first[0], first[1]
-        else:
-            d, _ = _distances(x, y, lanes, jacobian=True, out=jac[..., :3])
+    for _ in range(iterations):
+        d, _ = _distances(x, y, lanes, jacobian=True, out=jac[..., :3])
         wj = np.swapaxes(jac * w[..., None], 1, 2)  # (S, n, N)
         a = wj @ jac + pulled
         b = (wj @ (d - sides * _halves(lanes, x))[..., None])[..., 0] + pull * (lanes - target)
-        lanes -= np.linalg.solve(a, b[..., None])[..., 0]
+        step = np.linalg.solve(a, b[..., None])[..., 0]
+        lanes -= step
         lanes[:, 1:] = np.minimum(np.maximum(lanes[:, 1:], low), high)  # np.clip's values
+    if last_step is not None:
+        last_step[:] = np.abs(step).max(axis=1)
     return lanes
 
 
@@ -431,20 +432,23 @@ def _fit_seeds(seeds, pieces, points, allowed, lane_width, priors, limits, regio
     (two fits cost as much as one search: the time is the calls, not the seeds)."""
     x, y, w = points
     ahead = x.reshape(-1, POINTS).mean(axis=1)  # each piece's distance ahead
-    lanes = seeds
+    lanes, before = seeds, None  # before: each lane's sides in the round before, when its fit
+    # there had settled
     for tol in TOLERANCES:
-        # the distances with their derivatives: the sides need the one, the fit's first step
-        # both (the same distances, made once)
-        slopes = np.empty((len(lanes), len(x), 3))
-        distance, _ = _distances(x, y, lanes, jacobian=True, out=slopes)
+        distance = _distances(x, y, lanes)[0]
         sides = _sides(distance, allowed, _halves(lanes, ahead), tol * lane_width, regions)
+        if before is not None and np.array_equal(sides, before):
+            continue  # the fit the round before, from where it settled: it would not move
         on = np.repeat(sides, POINTS, axis=1)
-        lanes = fit_lanes(x, y, on, (on != 0) * w, lanes, priors, limits,
-                          first=(distance, slopes))
+        step = np.empty(len(lanes))
+        lanes = fit_lanes(x, y, on, (on != 0) * w, lanes, priors, limits, last_step=step)
         # seeds from pieces of one line mostly grow into one lane: fit it once
         grid = np.round(lanes / (0.02 * lane_width, 0.02, 0.1 / lane_width, 0.02 * lane_width,
                                  0.02)[:lanes.shape[1]])
-        lanes = lanes[_firsts(grid)]
+        firsts = _firsts(grid)
+        lanes, before = lanes[firsts], None
+        if np.all(step[firsts] < SETTLED):
+            before = sides[firsts]
     distance = _distances(x, y, lanes)[0]
     half, halves = lanes[:, 3] / 2, _halves(lanes, ahead)  # at the robot; at each piece
     sides = _sides(distance, allowed, halves, TOLERANCES[-1] * lane_width, regions,

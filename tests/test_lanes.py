@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from kobuki_lane import LaneParams, main
+from lanelib import lanefit
 from lanelib.colour import ELONGATION, Piece, colour_masks, floor_boxes, tape_pieces, view_sides
 from lanelib.geometry import Mounting, floor_to_pixels
 from lanelib.improved import ImprovedController, ImprovedParams
@@ -334,6 +335,46 @@ def test_a_straight_lane_is_found_where_it_is():
     assert fit.e == pytest.approx(0.03, abs=0.005) and abs(fit.psi) < 0.01
     assert abs(fit.k) < 0.1 and fit.width == pytest.approx(DT.lane_width, abs=0.005)
     assert set(fit.sides) == {1, -1}
+
+
+def test_a_settled_fit_is_not_fitted_again_to_the_same_sides(monkeypatch):
+    # a tolerance round whose pieces fall on the same sides as the round before, where the fit
+    # had settled, is skipped: the lanes found are those of fitting every round, and fewer fits
+    # are made (with SETTLED 0 no fit counts as settled, so every round fits)
+    half = DT.lane_width / 2
+    rng = np.random.default_rng(3)
+    cases = []
+    for across, bend in ((0.03, 0.0), (-0.02, 2.5), (0.01, -3.0)):
+        pieces = (line_pieces(across + half, 'yellow', bend=bend, dashed=True) +
+                  line_pieces(across - half, 'white', bend=bend))
+        for p in pieces:  # a little noise, so that no fit is exact at its start
+            p.summary[1][:] += rng.normal(0.0, 0.003, len(p.summary[1]))
+        cases += [(pieces, None), (pieces, (across + 0.01, 0.02, bend)),
+                  (line_pieces(across - half, 'white', bend=bend), None)]
+    # a short white scrap 0.3 lane widths inside the right line, too short to move the lane:
+    # the lane predicted settles in the first round, the scrap on its right line there and in
+    # the second, off it in the third (a quarter of a lane width), which must be fitted again
+    x = np.linspace(0.3, 0.4, 20)
+    scrap = Piece(x, np.full_like(x, 0.03 - half + 0.3 * DT.lane_width), 0.0, 'white', 0.01, 0.03)
+    straight = line_pieces(0.03 + half, 'yellow', dashed=True) + line_pieces(0.03 - half, 'white')
+    cases.append((straight + [scrap], (0.03, 0.0, 0.0)))
+    fitted = lanefit.fit_lanes
+    counts = {}
+
+    def counted(*args, **kwargs):
+        counts[mode] = counts.get(mode, 0) + 1
+        return fitted(*args, **kwargs)
+
+    monkeypatch.setattr(lanefit, 'fit_lanes', counted)
+    found = {}
+    for mode, settled in (('skip', lanefit.SETTLED), ('every', 0.0)):
+        monkeypatch.setattr(lanefit, 'SETTLED', settled)
+        found[mode] = [find_lane(pieces, DT, DT.lane_width, prior=prior, prior_first=True)
+                       for pieces, prior in cases]
+    for a, b in zip(found['skip'], found['every']):
+        assert (a.e, a.psi, a.k, a.width) == pytest.approx((b.e, b.psi, b.k, b.width), abs=1e-9)
+        assert list(a.sides) == list(b.sides) and (a.bend is None) == (b.bend is None)
+    assert counts['skip'] < counts['every']
 
 
 def test_a_bend_is_one_lane():
