@@ -68,14 +68,23 @@ class CaptureSource:
         if self._timeout is None:
             return cv2.VideoCapture(self._arg)
         ms = int(self._timeout * 1000)
-        opened = []
-        worker = threading.Thread(target=lambda: opened.append(cv2.VideoCapture(
-            self._arg, cv2.CAP_FFMPEG, [cv2.CAP_PROP_OPEN_TIMEOUT_MSEC, ms,
-                                        cv2.CAP_PROP_READ_TIMEOUT_MSEC, ms])),
-            name='open-url', daemon=True)
+        opened, failed = [], []
+
+        def open_url():
+            try:
+                opened.append(cv2.VideoCapture(
+                    self._arg, cv2.CAP_FFMPEG, [cv2.CAP_PROP_OPEN_TIMEOUT_MSEC, ms,
+                                                cv2.CAP_PROP_READ_TIMEOUT_MSEC, ms]))
+            except Exception as e:  # cv2.error: said as the source's error, not a traceback
+                failed.append(e)
+
+        worker = threading.Thread(target=open_url, name='open-url', daemon=True)
         worker.start()
         while worker.is_alive():
             worker.join(0.1)
+        if not opened:  # before: an IndexError here, a traceback and exit status 1
+            raise SourceError(f"cannot open '{self.name}': OpenCV failed while opening it "
+                              f'({str(failed[0]).strip() if failed else "no reason given"})')
         return opened[0]
 
     def read(self):

@@ -605,8 +605,23 @@ def test_a_url_that_never_answers_says_it_waits_times_out_and_hears_ctrl_c(silen
     asked = time.monotonic()
     node.send_signal(signal.SIGINT)
     _, err = node.communicate(timeout=20)
-    assert node.returncode == 130 and time.monotonic() - asked < 5
+    assert node.returncode == 130 and time.monotonic() - asked < 5, (node.returncode, err)
     assert 'interrupted while opening' in err and 'Traceback' not in err
+
+
+def test_opencv_failing_while_it_opens_a_url_is_a_source_error(monkeypatch):
+    """Before: an error raised by VideoCapture on the opening thread left nothing to return,
+    and the node ended in an IndexError traceback, exit status 1."""
+    from lanelib import sources
+
+    def broken(*_args):
+        raise cv2.error('the backend gave up')
+
+    monkeypatch.setattr(sources.cv2, 'VideoCapture', broken)
+    with pytest.raises(sources.SourceError, match="cannot open 'http://cam/x.mjpg': OpenCV "
+                                                  'failed while opening it .*the backend gave up'):
+        sources.CaptureSource('http://cam/x.mjpg', 'http://cam/x.mjpg', live=True, timeout=1.0,
+                              warn=lambda _message: None)
 
 
 @pytest.mark.parametrize('source, pipeline, runs', [
