@@ -530,7 +530,8 @@ def _fit_bend(points, on, lane, lane_width, priors, limits):
         return None
     full = x, y, on
     x, y, on, w = x[own], y[own], on[own], w[own]
-    pull, target = (np.insert(np.asarray(v, float), 3, (0.0, 0.0)) for v in priors)
+    # the one arc's priors, and none on k2 and s0 (after k): np.insert took as long as a step
+    pull, target = (np.array([*v[:3], 0.0, 0.0, *v[3:]], float) for v in priors)
     pull += 1e-9
     n = len(pull)  # e, psi, k, k2, s0, width (, spread)
     if limits[0] == limits[1]:

@@ -14,7 +14,14 @@ import simulate
 from calibration import main as calibration_main
 from kobuki_lane import main as node_main
 from lanelib.camera import DUCKIEBOT_CAMERA, LECTURE_CAMERA
-from lanelib.geometry import Mounting, floor_to_pixels, pixels_to_floor, repitched
+from lanelib.geometry import (
+    Mounting,
+    floor_to_pixels,
+    pixels_to_floor,
+    ray_directions,
+    rays_to_floor,
+    repitched,
+)
 from lanelib.mounting import MountingError, read_mounting, solve_mounting
 from lanelib.sim.world import chessboard_view
 
@@ -56,6 +63,22 @@ def test_roll_turns_the_picture_about_the_optical_axis():
     assert np.allclose(floor_to_pixels(1.0, 0.3, matrix, level)[:2],
                        floor_to_pixels(1.0, 0.3, matrix, Mounting(0.2, 10.0, 0.1, 0.0))[:2])
 
+
+
+def test_floor_points_lie_where_the_pixels_rays_meet_the_floor():
+    """rays_to_floor, worked out a component at a time, gives exactly the floor points of
+    ray_directions' rays (the lens's height along each ray, over its drop), and marks the rays
+    that never come down."""
+    m = Mounting(0.2, 10.0, 0.1, 5.0)
+    rng = np.random.default_rng(3)
+    xn, yn = rng.uniform(-1.0, 1.0, 500), rng.uniform(-0.6, 0.8, 500)
+    x, y, ok = rays_to_floor(xn, yn, m)
+    d = ray_directions(xn, yn, m.pitch_deg, m.roll_deg)
+    down = -d[:, 2]
+    assert np.array_equal(ok, down > 1e-9) and 0 < ok.sum() < len(ok)
+    t = m.height / down[ok]
+    assert np.array_equal(x[ok], m.forward + t * d[ok, 0])
+    assert np.array_equal(y[ok], t * d[ok, 1])
 
 @pytest.fixture(scope='module')
 def wide_board(tmp_path_factory):
