@@ -64,7 +64,6 @@ def test_roll_turns_the_picture_about_the_optical_axis():
                        floor_to_pixels(1.0, 0.3, matrix, Mounting(0.2, 10.0, 0.1, 0.0))[:2])
 
 
-
 def test_floor_points_lie_where_the_pixels_rays_meet_the_floor():
     """rays_to_floor, worked out a component at a time, gives exactly the floor points of
     ray_directions' rays (the lens's height along each ray, over its drop), and marks the rays
@@ -79,6 +78,7 @@ def test_floor_points_lie_where_the_pixels_rays_meet_the_floor():
     t = m.height / down[ok]
     assert np.array_equal(x[ok], m.forward + t * d[ok, 0])
     assert np.array_equal(y[ok], t * d[ok, 1])
+
 
 @pytest.fixture(scope='module')
 def wide_board(tmp_path_factory):
