@@ -35,9 +35,15 @@ def camera_axes(pitch_deg, roll_deg=0.0):
 
 def ray_directions(xn, yn, pitch_deg, roll_deg=0.0):
     """Normalised image coordinates to ray directions (..., 3) in the robot frame."""
+    return np.stack(_ray_components(xn, yn, pitch_deg, roll_deg), axis=-1)
+
+
+def _ray_components(xn, yn, pitch_deg, roll_deg):
+    """ray_directions' three components (ahead, left, up), each an array of xn's shape: a
+    frame's pixels in an (N, 3) array took four times as long to project."""
     x_cam, y_cam, z_cam = camera_axes(pitch_deg, roll_deg)
-    xn, yn = np.asarray(xn, float)[..., None], np.asarray(yn, float)[..., None]
-    return xn * x_cam + yn * y_cam + z_cam
+    xn, yn = np.asarray(xn, float), np.asarray(yn, float)
+    return tuple(xn * x_cam[i] + yn * y_cam[i] + z_cam[i] for i in range(3))
 
 
 def rays_to_floor(xn, yn, mounting):
@@ -45,11 +51,7 @@ def rays_to_floor(xn, yn, mounting):
 
     Returns x, y and a mask of the rays that point down to the floor.
     """
-    # ray_directions' three components one at a time (the same sums, in the same order): a
-    # frame's pixels in an (N, 3) array took four times as long
-    x_cam, y_cam, z_cam = camera_axes(mounting.pitch_deg, mounting.roll_deg)
-    xn, yn = np.asarray(xn, float), np.asarray(yn, float)
-    ahead, left, up = (xn * x_cam[i] + yn * y_cam[i] + z_cam[i] for i in range(3))
+    ahead, left, up = _ray_components(xn, yn, mounting.pitch_deg, mounting.roll_deg)
     down = -up
     ok = down > 1e-9
     t = mounting.height / np.where(ok, down, 1.0)
