@@ -185,12 +185,14 @@ class BagRecorder:
     def _flush(self):
         """The open chunk to the file, and the file to the disk (rosbag reindex cannot mend a
         chunk without messages: a chunk is written once it has some)."""
+        # the next flush is due a stretch after this one began, not after the disk answered: a
+        # slow fsync (a busy disk) must not lengthen the stretch a kill can lose
+        self._flushed = time.monotonic()
         writer = self._writer
         if writer.chunks[-1].connections:
             writer.write_chunk(writer.chunks[-1])
         writer.bio.flush()
         os.fsync(writer.bio.fileno())
-        self._flushed = time.monotonic()
 
     def _write(self, connection, ns, data):
         with self._lock:
