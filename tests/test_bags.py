@@ -211,7 +211,6 @@ def test_a_bag_from_a_killed_run_loses_at_most_the_last_second_after_rosbag_rein
                '14 frames decided')
     node.send_signal(signal.SIGKILL)
     node.wait(timeout=30)
-    decided = len(read_jsonl(decisions))
     fix = subprocess.run(['rosbag', 'reindex', str(bag)], capture_output=True, text=True,
                          timeout=120)
     assert fix.returncode == 0, fix.stderr
