@@ -109,17 +109,27 @@ def bent_distance(x, y, arc, bend):
 
 
 def _bent_distances(x, y, q):
-    """bent_distance for P centre lines at once, q (P, 5): e, psi, k, k2, s0; (P, N)."""
+    """bent_distance for P centre lines at once, q (P, 5): e, psi, k, k2, s0; (P, N). The
+    fit of a bend calls it a dozen times a frame on a few dozen points, so its time is its
+    numpy calls: each sine and cosine is taken once, and the straight (k = 0) forms only
+    where some line is straight (np.where's other branch, every element the same)."""
     e, psi, k, k2, s0 = (q[:, i:i + 1] for i in range(5))
     # where the second arc starts: _along_arc from (0, e) heading psi, s0 along
     h0 = psi + k * s0
+    s, c, s2, c2 = np.sin(psi), np.cos(psi), np.sin(h0), np.cos(h0)
     straight = np.abs(k) < 1e-4
-    bent = np.where(straight, 1.0, k)
-    x0 = np.where(straight, s0 * np.cos(psi), (np.sin(h0) - np.sin(psi)) / bent)
-    y0 = np.where(straight, e + s0 * np.sin(psi), e + (np.cos(psi) - np.cos(h0)) / bent)
-    frame = _arc_frame(x, y, e, psi)
-    return np.where(_along_in(*frame[:2], k) > s0, _distance(x - x0, y, y0, h0, k2)[0],
-                    _distance_in(*frame, k)[0])
+    if straight.any():
+        bent = np.where(straight, 1.0, k)
+        x0 = np.where(straight, s0 * c, (s2 - s) / bent)
+        y0 = np.where(straight, e + s0 * s, e + (c - c2) / bent)
+    else:
+        x0, y0 = (s2 - s) / k, e + (c - c2) / k
+    dy = y - e
+    u, v = x * c + dy * s, dy * c - x * s  # _arc_frame's
+    dx2, dy2 = x - x0, y - y0
+    first = _distance_in(u, v, s, c, k)[0]
+    second = _distance_in(dx2 * c2 + dy2 * s2, dy2 * c2 - dx2 * s2, s2, c2, k2)[0]
+    return np.where(_along_in(u, v, k) > s0, second, first)
 
 
 def _along(x, y, e, psi, k):
@@ -131,6 +141,8 @@ def _along(x, y, e, psi, k):
 def _along_in(u, v, k):
     """_along from the points in the arc's own frame."""
     flat = np.abs(k) < 1e-9
+    if not flat.any():  # np.where's other branch, every element the same, in fewer calls
+        return np.arctan2(k * u, 1 - k * v) / k
     return np.where(flat, u, np.arctan2(k * u, 1 - k * v) / np.where(flat, 1.0, k))
 
 
