@@ -645,21 +645,19 @@ def _left_normals(x, y, x0, y0, h0, k):
 
 def _centre_points(pieces, sides, lane, bend=None):
     """The lane's pieces moved half a lane width (where they lie: _halves) towards the centre
-    line, across it."""
-    xs, ys, ws = [], [], []
+    line, across it. Every piece's points at once (each point's arithmetic is its own, so a
+    call a piece gave the same numbers in more calls)."""
+    mine = [(piece, side) for piece, side in zip(pieces, sides) if side]
+    x = np.concatenate([piece.x for piece, _ in mine])
+    y = np.concatenate([piece.y for piece, _ in mine])
+    side = np.concatenate([np.full(len(piece.x), side) for piece, side in mine])
     e, psi, k = arc = lane[:3]
+    nx, ny = _left_normals(x, y, 0.0, e, psi, k)
     if bend is not None:
         (x0,), (y0,), (h0,) = centre_path(arc, [bend[0]])
-    for piece, side in zip(pieces, sides):
-        if not side:
-            continue
-        nx, ny = _left_normals(piece.x, piece.y, 0.0, e, psi, k)
-        if bend is not None:
-            later = _along(piece.x, piece.y, e, psi, k) > bend[0]
-            nx2, ny2 = _left_normals(piece.x, piece.y, x0, y0, h0, bend[1])
-            nx, ny = np.where(later, nx2, nx), np.where(later, ny2, ny)
-        half = _halves(np.asarray(lane, float)[None, :], piece.x)[0]
-        xs.append(piece.x - side * half * nx)
-        ys.append(piece.y - side * half * ny)
-        ws.append(piece.w)
-    return np.concatenate(xs), np.concatenate(ys), np.concatenate(ws)
+        later = _along(x, y, e, psi, k) > bend[0]
+        nx2, ny2 = _left_normals(x, y, x0, y0, h0, bend[1])
+        nx, ny = np.where(later, nx2, nx), np.where(later, ny2, ny)
+    half = _halves(np.asarray(lane, float)[None, :], x)[0]
+    return (x - side * half * nx, y - side * half * ny,
+            np.concatenate([piece.w for piece, _ in mine]))
