@@ -199,16 +199,7 @@ def tape_pieces(mask, colour, matrix, mounting, tape_width, min_length, step, ro
     (a mask: the edge of the view, see view_sides), the view cuts the tape: the points level
     with the cut are left out (their middle is not the tape's). At most `budget` pixels of a
     region and max_points of a piece are used."""
-    # Grana's block-based labelling: the same labels as the default (Spaghetti) on 8-connected
-    # masks, in two thirds of its time on the floor band's; on the rectangle that holds the
-    # mask's pixels (about half the band), from an even row and column, so that its 2 x 2
-    # blocks, and so its labels, are the whole mask's
-    x0, y0, span0, height0 = cv2.boundingRect(mask)
-    if not span0:
-        return []
-    x0, y0 = x0 - x0 % 2, y0 - y0 % 2
-    count, labels, stats, _ = cv2.connectedComponentsWithStatsWithAlgorithm(
-        mask[y0:y0 + height0 + 1, x0:x0 + span0 + 1], 8, cv2.CV_32S, cv2.CCL_BBDT)
+    count, labels, stats, (x0, y0) = _labelled(mask)
     regions = []  # (label, the pixels' view cuts) of each region, its pixels projected at once
     uv = []
     for i in range(1, count):
@@ -246,6 +237,20 @@ def tape_pieces(mask, colour, matrix, mounting, tape_width, min_length, step, ro
                 if piece is not None:
                     pieces.append(piece)
     return pieces
+
+
+def _labelled(mask):
+    """(count, labels, stats, (x0, y0)): the 8-connected regions of a mask, as
+    cv2.connectedComponentsWithStats gives them for the part of it from column x0 and row y0
+    (stats' positions in that part). Grana's block-based labelling: the same labels as the
+    default (Spaghetti), in two thirds of its time on the floor band's masks; on the rectangle
+    that holds the mask's pixels (about half the band), from an even row and column, so that
+    its 2 x 2 blocks, and so its labels, are the whole mask's."""
+    x0, y0, width, height = cv2.boundingRect(mask)
+    x0, y0 = x0 - x0 % 2, y0 - y0 % 2
+    count, labels, stats, _ = cv2.connectedComponentsWithStatsWithAlgorithm(
+        mask[y0:y0 + height + 1, x0:x0 + width + 1], 8, cv2.CV_32S, cv2.CCL_BBDT)
+    return count, labels, stats, (x0, y0)
 
 
 def _axis(x, y):

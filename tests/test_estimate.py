@@ -388,6 +388,22 @@ def test_bent_lines_measured_side_by_side_are_each_measured_alone():
         assert row == pytest.approx(alone, abs=1e-9)
         assert bent_distance(x, y, (e, psi, k), (s0, k2)) == pytest.approx(row, abs=1e-12)
     assert np.abs(together[1] - signed_distance(x, y, *lines[1, :3])).max() > 0.05  # bent
+    # with no line straight the straight forms are left out: the same numbers, to the bit
+    assert np.array_equal(lanefit._bent_distances(x, y, lines[[0, 3]]), together[[0, 3]])
+
+
+def test_the_centre_points_of_all_pieces_are_each_pieces_own():
+    # _centre_points moves every piece's points in one array: each point as its piece alone
+    # would be moved, straight or with a bend
+    pieces = [Piece(np.linspace(0.2, 0.5, 9) + 0.1 * i, np.linspace(0.1, 0.15, 9) * (-1) ** i,
+                    0.1, 'white', 0.3, 0.03) for i in range(4)]
+    sides = np.array([1, -1, 0, 1])
+    lane = np.array([0.01, 0.05, 1.2, 0.24])
+    for bend in (None, (0.4, -2.0)):
+        together = lanefit._centre_points(pieces, sides, lane, bend)
+        alone = [lanefit._centre_points([p], [s], lane, bend) for p, s in zip(pieces, sides) if s]
+        for got, want in zip(together, zip(*alone)):
+            assert np.array_equal(got, np.concatenate(want))
 
 
 def test_a_bend_ahead_of_a_straight_leaves_the_robot_aligned_with_its_lane(monkeypatch):

@@ -202,6 +202,30 @@ def test_pieces_much_wider_or_narrower_than_the_tape_are_not_kept():
     assert len(tape_pieces(painted([(0.0, 0.05)]), 'white', K, MOUNT, 0.05, 0.02, step=0.15)) > 5
 
 
+def test_a_masks_regions_are_labelled_as_in_the_whole_mask():
+    # colour._labelled labels only the rectangle that holds the mask's pixels: its labels and
+    # their statistics, put back in place, are those of the whole mask, wherever the
+    # rectangle starts (odd rows and columns among them)
+    from lanelib.colour import _labelled
+    rng = np.random.default_rng(3)
+    for _ in range(40):
+        mask = np.zeros((120, 160), np.uint8)
+        for _ in range(rng.integers(1, 8)):
+            x, y = (int(v) for v in rng.integers(0, (150, 110)))
+            w, h = (int(v) for v in rng.integers(1, 40, 2))
+            mask[y:y + h, x:x + w] = 255 * (rng.random((min(h, 120 - y), min(w, 160 - x))) < 0.8)
+        count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+        got, part, part_stats, (x0, y0) = _labelled(mask)
+        placed = np.zeros_like(labels)
+        placed[y0:y0 + part.shape[0], x0:x0 + part.shape[1]] = part
+        assert got == count and np.array_equal(placed, labels)
+        moved = part_stats[1:].copy()
+        moved[:, cv2.CC_STAT_LEFT] += x0
+        moved[:, cv2.CC_STAT_TOP] += y0
+        assert np.array_equal(moved, stats[1:])
+    assert _labelled(np.zeros((10, 12), np.uint8))[0] == 1  # no pixel: no region
+
+
 def test_a_dash_need_only_be_a_little_longer_than_wide_a_piece_of_solid_line_more():
     # dashes 4 cm long and 3 cm wide, 8 cm apart, running ahead on the left: what
     # gym-duckietown's 2 by 1 in dashes measure with domain rand (1.3 to 1.5 times as long)
