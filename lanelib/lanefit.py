@@ -124,11 +124,9 @@ def _bent_distances(x, y, q):
         y0 = np.where(straight, e + s0 * s, e + (c - c2) / bent)
     else:
         x0, y0 = (s2 - s) / k, e + (c - c2) / k
-    dy = y - e
-    u, v = x * c + dy * s, dy * c - x * s  # _arc_frame's
-    dx2, dy2 = x - x0, y - y0
+    u, v = _turned(x, y - e, s, c)  # in the first arc's frame, and the second's
     first = _distance_in(u, v, s, c, k)[0]
-    second = _distance_in(dx2 * c2 + dy2 * s2, dy2 * c2 - dx2 * s2, s2, c2, k2)[0]
+    second = _distance_in(*_turned(x - x0, y - y0, s2, c2), s2, c2, k2)[0]
     return np.where(_along_in(u, v, k) > s0, second, first)
 
 
@@ -149,8 +147,12 @@ def _along_in(u, v, k):
 def _arc_frame(x, y, e, psi):
     """(u, v, sin psi, cos psi): points in the arc's own frame, u ahead, v left of its start."""
     s, c = np.sin(psi), np.cos(psi)
-    dy = y - e
-    return x * c + dy * s, dy * c - x * s, s, c
+    return (*_turned(x, y - e, s, c), s, c)
+
+
+def _turned(dx, dy, s, c):
+    """(u, v): offsets (dx, dy) from a point in the frame heading (cos, sin) = (c, s) there."""
+    return dx * c + dy * s, dy * c - dx * s
 
 
 def _distance(x, y, e, psi, k, jacobian=False, out=None):
@@ -650,7 +652,7 @@ def _centre_points(pieces, sides, lane, bend=None):
     mine = [(piece, side) for piece, side in zip(pieces, sides) if side]
     x = np.concatenate([piece.x for piece, _ in mine])
     y = np.concatenate([piece.y for piece, _ in mine])
-    side = np.concatenate([np.full(len(piece.x), side) for piece, side in mine])
+    signs = np.concatenate([np.full(len(piece.x), side) for piece, side in mine])
     e, psi, k = arc = lane[:3]
     nx, ny = _left_normals(x, y, 0.0, e, psi, k)
     if bend is not None:
@@ -659,5 +661,5 @@ def _centre_points(pieces, sides, lane, bend=None):
         nx2, ny2 = _left_normals(x, y, x0, y0, h0, bend[1])
         nx, ny = np.where(later, nx2, nx), np.where(later, ny2, ny)
     half = _halves(np.asarray(lane, float)[None, :], x)[0]
-    return (x - side * half * nx, y - side * half * ny,
+    return (x - signs * half * nx, y - signs * half * ny,
             np.concatenate([piece.w for piece, _ in mine]))
