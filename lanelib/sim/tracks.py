@@ -147,11 +147,6 @@ def from_dict(doc, name='track'):
     if tape >= lane:
         raise TrackError(f'{name}.tape_width must be smaller than lane_width')
     segments = _segments(doc['segments'], name)
-    for i, seg in enumerate(segments):
-        if 'arc' in seg and seg['arc']['radius'] <= lane / 2 + tape:
-            raise TrackError(f"{name}.segments[{i}].arc.radius {seg['arc']['radius']:g} m is "
-                             f'not more than half the lane width and a tape ({lane / 2 + tape:g} '
-                             'm): the inner tape would cross itself')
     if sum(seg.get('straight', 0.0) + abs(math.radians(seg['arc']['angle_deg'])) *
            seg['arc']['radius'] if 'arc' in seg else seg['straight'] for seg in segments) > 1000:
         raise TrackError(f'{name}.segments are more than 1 km long')
@@ -231,17 +226,45 @@ def _world(value, where):
 
 def with_world(spec, world, keep_camera=False, model=None):
     """The track in another world: its lane width, camera and mounting (unless the track file
-    gave a mounting: keep_camera), and the lane profile that describes it."""
+    gave a mounting: keep_camera), and the lane profile that describes it. Raises TrackError
+    for a bend too tight for the world's lines (_check_bends)."""
     track = spec.track
     if world.lane_width is not None and world.lane_width != track.lane_width:
         tape = min(track.tape_width, world.lane_width / 4)
         track = Track(lane_width=world.lane_width, tape_width=tape, segments=track.segments,
                       start=track.start)
+    _check_bends(track, world, spec.name)
     mounting = spec.mounting
     if world.mounting is not None and not keep_camera:
         mounting = Mounting(*world.mounting)
     return replace(spec, track=track, mounting=mounting, world=world,
                    camera=model or world.camera)
+
+
+def _check_bends(track, world, name):
+    """Every bend must be wider than the lines on its inside reach from the centre line (each
+    line's offset and its whole width): a tighter one would draw its inner line crossing
+    itself. The lines are the world's (Duckietown's road has the other lane's edge 1.5 lane
+    widths to the left), or the lecture's two tapes half a lane width either side; the lane
+    width is the world's where it has one (a file's own is for the lecture's world)."""
+    lane = track.lane_width
+    lines = [(p.offset, p.width) for p in world.lines] or [(-0.5, track.tape_width),
+                                                           (0.5, track.tape_width)]
+    for i, seg in enumerate(track.segments):
+        if 'arc' not in seg:
+            continue
+        radius, side = seg['arc']['radius'], math.copysign(1.0, seg['arc']['angle_deg'])
+        inside = [(offset * side * lane + width, offset) for offset, width in lines
+                  if offset * side > 0]
+        reach, offset = max(inside, default=(0.0, 0.0))
+        if radius <= reach:
+            which = ('half the lane width and a tape' if abs(offset) == 0.5 and not world.lines
+                     else f'where the {world.name} world\'s line {abs(offset):g} lane widths '
+                     f"to the {'left' if offset > 0 else 'right'} reaches on its inside, with "
+                     'its width')
+            raise TrackError(f'{name}.segments[{i}].arc.radius {radius:g} m is not more than '
+                             f'{which} ({reach:g} m, the lane {lane:g} m wide): the line would '
+                             'cross itself')
 
 
 def load_track(spec):
