@@ -111,6 +111,15 @@ class TrackSimulator:
         offset = -(self.base.x - cx) * math.sin(heading) + (self.base.y - cy) * math.cos(heading)
         return s, offset
 
+    def truth(self):
+        """Where the robot is in its lane now: (offset [m, + left of the centre line], heading
+        [rad, + turned left of the line's direction], the line's curvature there [1/m]), the
+        signs of the improved controller's estimate (ImprovedController.extra)."""
+        s, offset = self.where()
+        heading = self.base.pose[2] - self.spec.track.centre[self._idx, 2]
+        heading = (heading + math.pi) % (2 * math.pi) - math.pi
+        return offset, heading, self.spec.track.curvature_at(s)
+
     def _check(self, t):
         s, offset = self.where()
         self.history.append((t, self.base.x, self.base.y, s, offset))

@@ -128,6 +128,22 @@ class Track:
     def length(self):
         return float(self.centre[-1, 3])
 
+    def curvature_at(self, s):
+        """The centre line's curvature [1/m, + bending left] at arc length s (the segment's
+        that s lies in; beyond the end, the last one's)."""
+        start = 0.0
+        for seg in self.segments:
+            if 'straight' in seg:
+                length, curvature = float(seg['straight']), 0.0
+            else:
+                radius, angle = float(seg['arc']['radius']), float(seg['arc']['angle_deg'])
+                length = radius * abs(math.radians(angle))
+                curvature = math.copysign(1.0 / radius, angle)
+            start += length
+            if s < start:
+                break
+        return curvature
+
     def pose_at(self, s, offset=0.0, yaw_error=0.0):
         """Robot pose at arc length s, `offset` metres left of the centre line, yawed."""
         i = int(np.clip(np.searchsorted(self.centre[:, 3], s), 0, len(self.centre) - 1))
