@@ -22,6 +22,8 @@ usage:
     python simulate.py --track lecture --controller improved --json out.json --plot out.png
     python simulate.py --track s_bend --world duckietown --controller improved --video run.avi
     python simulate.py --track my_track.yaml --controller lecture --video run.avi
+    python simulate.py --track tools/tracks/duckietown_inner.yaml --robot duckiebot \
+        --controller improved                          a robot preset, as the node takes it
     python simulate.py --benchmark                     every built-in track and world
     python simulate.py --list-tracks                   the built-in tracks and worlds
 
@@ -44,13 +46,17 @@ import functools
 import json
 import math
 import sys
+from dataclasses import replace
 
 import cv2
+import numpy as np
 
 from kobuki_lane import LaneFollower, LaneParams, make_controller
+from kobuki_lane import build_parser as node_parser
 from lanelib.camera import CAMERAS
 from lanelib.cli import check_output, check_outputs_apart, fail
 from lanelib.mounting import MountingError, parse_pattern, read_mounting
+from lanelib.node import settings_from
 from lanelib.outputs import Outputs
 from lanelib.robot import ODOM_TOPIC
 from lanelib.rospy_standin import Odometry as OdometryMessage
@@ -74,12 +80,95 @@ PROG = 'simulate.py'
 
 # ---------------------------------------------------------------- runs
 
+def robot_settings(robot, spec, controller='improved', mounting=None):
+    """(lecture table, improved controller's settings or None) as kobuki_lane resolves
+    `--robot ROBOT --controller CONTROLLER`: the preset's rate, lane profile, distances in lane
+    widths, speeds, gates; told the track's lane width and the camera's mounting, the simulated
+    one or `mounting` (what --mounting FILE tells the node). Raises ValueError (RobotError)
+    for a preset that cannot be used."""
+    args = node_parser().parse_args(['--robot', robot, '--controller', controller])
+    params, _, _, improved, _ = settings_from(args, lambda name, default=None: default,
+                                              LaneParams)
+    if improved is not None:
+        m = mounting or spec.mounting
+        improved = replace(improved, camera_height=m.height, camera_pitch=m.pitch_deg,
+                           camera_forward=m.forward, camera_roll=m.roll_deg,
+                           lane_width=spec.track.lane_width)
+    return params, improved
+
+
+def preset_factory(improved):
+    """A run's controller_factory that makes the controller with `improved` (robot_settings'),
+    the world's camera."""
+    def factory(name, spec, params, odometry=None):
+        return make_controller(name, params, CAMERAS[spec.camera], improved, odometry=odometry)
+    return factory
+
+
 def controller_for(name, spec, params, mounting=None, odometry=None):
     """kobuki_lane's controller, told the track's camera; the improved one also its mounting
     (or `mounting`, e.g. from a --mounting file), lane and odometry."""
     return make_controller(name, params, CAMERAS[spec.camera],
                            improved_params(spec, mounting) if name == 'improved' else None,
                            odometry=odometry)
+
+
+class ComparedFollower(LaneFollower):
+    """kobuki_lane's loop, each frame's lane estimate (the improved controller's decision
+    record) kept beside where the robot truly was in its lane when the frame was rendered
+    (truth: TrackSimulator.truth)."""
+
+    def __init__(self, *args, truth, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.truth, self.readings = truth, []
+
+    def step(self, frame, label, read_at=None):
+        true = self.truth()  # the robot has not moved since the frame was rendered
+        record = super().step(frame, label, read_at)
+        self.readings.append((*true, record.get('offset_m'), record.get('heading_rad'),
+                              record.get('curvature')))
+        return record
+
+
+def estimate_metrics(readings):
+    """How well the lane estimate read the lane (ComparedFollower.readings), or None for a
+    controller that keeps none (the lecture's): of the frames, how many had an estimate; the
+    median and 90th percentile of its offset's and heading's errors; on the bends, the median
+    share of the bend's curvature it read (1: all of it, 0.5: a bend read half as tight), and
+    on the straights the median curvature it read [1/m]."""
+    rows = [r for r in readings if r[3] is not None]
+    if not rows:
+        return None
+    true_offset, true_heading, true_k, offset, heading, k = (np.array(c, float)
+                                                             for c in zip(*rows))
+    offset_error = np.abs(offset - true_offset) * 100
+    heading_error = np.degrees(np.abs(heading - true_heading))
+    bend = true_k != 0
+
+    def pair(errors):
+        return [round(float(np.percentile(errors, q)), 2) for q in (50, 90)]
+
+    return dict(frames=len(rows), of=len(readings),
+                offset_error_cm=pair(offset_error), heading_error_deg=pair(heading_error),
+                bend_frames=int(bend.sum()),
+                bend_curvature_read=(round(float(np.median(k[bend] / true_k[bend])), 3)
+                                     if bend.any() else None),
+                straight_curvature=(round(float(np.median(k[~bend])), 3)
+                                    if (~bend).any() else None))
+
+
+def describe_estimate(e):
+    """The estimate_metrics line simulate.py prints."""
+    line = (f"estimate on {e['frames']} of {e['of']} frames: offset error "
+            f"{e['offset_error_cm'][0]:.1f} cm median ({e['offset_error_cm'][1]:.1f} at the 90th "
+            'percentile), heading error '
+            f"{e['heading_error_deg'][0]:.1f} deg ({e['heading_error_deg'][1]:.1f})")
+    if e['bend_curvature_read'] is not None:
+        line += (f"; in the bends it read {e['bend_curvature_read']:.0%} of their curvature "
+                 f"(median of {e['bend_frames']} frames)")
+    if e['straight_curvature'] is not None:
+        line += f", on the straights {e['straight_curvature']:+.2f} /m"
+    return line
 
 
 def run(spec, controller='lecture', seed=0, video=None, plot=None, time_limit=None,
@@ -98,9 +187,9 @@ def run(spec, controller='lecture', seed=0, video=None, plot=None, time_limit=No
     sink = SideBySide(video, params.rate, topdown) if video else None
     odom = Odometry(ros, ODOM_TOPIC, msg_type=OdometryMessage) if odometry else None
     ctl = controller_factory(controller, spec, params, **({'odometry': odom} if odom else {}))
-    follower = LaneFollower(ros, sim, ctl, SafeBase(ros, Twist),
-                            Outputs(params, video=sink, draw=getattr(ctl, 'draw', None)),
-                            params.rate)
+    follower = ComparedFollower(ros, sim, ctl, SafeBase(ros, Twist),
+                                Outputs(params, video=sink, draw=getattr(ctl, 'draw', None)),
+                                params.rate, truth=sim.truth)
     try:
         follower.run()
     finally:
@@ -108,6 +197,7 @@ def run(spec, controller='lecture', seed=0, video=None, plot=None, time_limit=No
             sink.close()
     result = sim.metrics(controller)
     result['decisions'] = follower.counts
+    result['estimate'] = estimate_metrics(follower.readings)
     if plot:
         outcome = 'completed' if result['completed'] else 'ended: ' + result['ended']
         title = (f"{spec.name} / {controller}: {outcome}"
@@ -198,6 +288,13 @@ def build_parser():
                         help="the lecture's rule (default) or the improved controller")
     parser.add_argument('--seed', type=ranged(0, 10**9, int), default=0,
                         help='frame noise seed, 0 to 10^9 (default 0)')
+    parser.add_argument('--robot', metavar='NAME|FILE',
+                        help="drive with a robot preset's settings, as kobuki_lane.py --robot "
+                             "resolves them: 'kobuki', 'duckiebot' or a YAML file (its loop "
+                             'rate, lane profile, distances and speeds); told the lane width '
+                             "of the track and the camera's mounting (the simulated one, or "
+                             "--mounting's); the camera is the world's (default: the "
+                             "simulator's own settings for the world)")
     parser.add_argument('--json', metavar='FILE', help='write the run metrics as JSON')
     parser.add_argument('--plot', metavar='FILE', help='write the top-down view as PNG')
     parser.add_argument('--video', metavar='FILE',
@@ -362,23 +459,32 @@ def main(argv=None):
     if args.chessboard:
         write_chessboard(spec, args)
         return 0
-    factory = controller_for
+    factory, params, mounting = controller_for, None, None
     if args.mounting:
         try:
-            factory = functools.partial(controller_for, mounting=read_mounting(args.mounting))
+            mounting = read_mounting(args.mounting)
         except MountingError as e:
             fail(PROG, f'--mounting: {e}')
+        factory = functools.partial(controller_for, mounting=mounting)
+    if args.robot:
+        try:
+            params, improved = robot_settings(args.robot, spec, args.controller, mounting)
+        except ValueError as e:
+            fail(PROG, f'--robot: {e}')
+        factory = preset_factory(improved)
     limits = BaseLimits(accel=args.accel, alpha=args.accel * 4, latency=args.latency,
                         slip=args.slip, odom_noise=args.odom_noise)
     result = run(spec, args.controller, args.seed, args.video, args.plot, args.time_limit,
                  args.keep_going, args.start_offset, math.radians(args.start_yaw), limits,
-                 factory, args.odometry)
+                 factory, args.odometry, params)
     print(f"{result['track']} / {result['controller']}: "
           f"{'completed' if result['completed'] else 'ended: ' + result['ended']}, "
           f"progress {result['progress']:.0%}, {result['distance_m']:.2f} m in "
           f"{result['time_s']:.1f} s ({result['mean_speed_mps']:.3f} m/s), RMS offset "
           f"{result['rms_offset_m'] * 100:.1f} cm, max {result['max_offset_m'] * 100:.1f} cm, "
           f"departures {result['departures']}")
+    if result['estimate']:
+        print(describe_estimate(result['estimate']))
     write_json(args.json, result)
     return 0 if result['completed'] else 1
 

@@ -49,7 +49,6 @@ import os
 import subprocess
 import sys
 import time
-from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -420,17 +419,11 @@ def time_improved(frames, repeats, lane='lecture'):
 
 def preset_settings(robot, spec):
     """(lecture table, improved controller's settings) as the node resolves `--robot ROBOT
-    --controller improved`, the camera's mounting the simulated one (as --mounting FILE tells
-    the node the robot's) and the lane width the track's."""
-    from lanelib.node import settings_from
+    --controller improved`, the camera's mounting the simulated one and the lane width the
+    track's: what `simulate.py --robot ROBOT --controller improved` drives with."""
+    import simulate
 
-    args = kobuki_lane.build_parser().parse_args(['--robot', robot, '--controller', 'improved'])
-    params, _, _, improved, _ = settings_from(args, lambda name, default=None: default,
-                                              LaneParams)
-    m = spec.mounting
-    return params, replace(improved, camera_height=m.height, camera_pitch=m.pitch_deg,
-                           camera_forward=m.forward, camera_roll=m.roll_deg,
-                           lane_width=spec.track.lane_width)
+    return simulate.robot_settings(robot, spec)
 
 
 def time_improved_driving(tracks, seed=0, robot=None, world=None):
