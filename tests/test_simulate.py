@@ -635,13 +635,16 @@ def test_the_plots_title_has_a_band_of_its_own_above_the_track():
     assert titled[:40].max() > 200  # the text is in the band
 
 
+TRACKS = os.path.join(os.path.dirname(__file__), '..', 'tools', 'tracks')
+
+
 def test_the_unseen_s_bends_of_the_benchmarks_load_and_turn_both_ways():
     """tools/tracks: the S-bends docs/benchmarks.md measures the bend model on."""
     import yaml
 
     from lanelib.sim.tracks import load_track
-    folder = os.path.join(os.path.dirname(__file__), '..', 'tools', 'tracks')
-    names = sorted(n for n in os.listdir(folder) if n.endswith('.yaml'))
+    folder = TRACKS
+    names = sorted(n for n in os.listdir(folder) if n.startswith('s_unseen'))
     assert names == ['s_unseen_a.yaml', 's_unseen_b.yaml', 's_unseen_c.yaml']
     for name in names:
         with open(os.path.join(folder, name)) as f:
@@ -649,3 +652,96 @@ def test_the_unseen_s_bends_of_the_benchmarks_load_and_turn_both_ways():
                       if 'arc' in s]
         assert min(angles) < 0 < max(angles)
         load_track(os.path.join(folder, name))
+
+
+@pytest.mark.parametrize('name, turn, radius', [('duckietown_small_loop', 1, 0.41),
+                                                ('duckietown_small_loop_cw', -1, 0.175)])
+def test_the_duckietown_small_loops_close_on_themselves_with_the_maps_corners(name, turn,
+                                                                             radius):
+    spec = load_track(os.path.join(TRACKS, name + '.yaml'))
+    assert spec.world.name == 'duckietown' and spec.track.lane_width == 0.2375
+    assert spec.closed  # the loop ends where it starts, heading as it started
+    arcs = [s['arc'] for s in spec.track.segments if 'arc' in s]
+    assert [a['angle_deg'] for a in arcs] == [turn * 90] * 4
+    assert {a['radius'] for a in arcs} == {radius}
+    # the lane's centre half a lane width outside (or inside) the road's, 0.2925 m round
+    assert radius == pytest.approx(0.585 / 2 + turn * spec.track.lane_width / 2, abs=0.002)
+
+
+@pytest.mark.parametrize('world, radius, angle, message', [
+    ('duckietown', 0.3, 90, "duckietown world's line 1.5 lane widths to the left"),
+    ('duckietown', 0.15, -90, "duckietown world's line 0.5 lane widths to the right"),
+    ('wood', 0.19, 90, "wood world's line 0.5 lane widths to the left"),
+])
+def test_a_bend_too_tight_for_a_worlds_lines_is_refused_with_the_worlds_lane(world, radius,
+                                                                            angle, message):
+    # checked before against the file's lane (the lecture's 0.35 m by default), so a
+    # Duckietown inner corner (0.175 m) was refused and Duckietown's other lane, 1.5 lane
+    # widths over, was drawn crossing itself in a left bend of 0.3 m
+    doc = {'world': world, 'segments': [{'arc': {'radius': radius, 'angle_deg': angle}}]}
+    with pytest.raises(TrackError) as e:
+        from_dict(doc, 'bad.yaml')
+    assert message in str(e.value) and 'cross itself' in str(e.value)
+    doc['segments'][0]['arc']['radius'] = radius + 0.11
+    assert from_dict(doc, 'ok.yaml').track.segments[0]['arc']['radius'] == radius + 0.11
+    # and so is a built-in track moved to a world whose lines it is too tight for
+    with pytest.raises(TrackError):
+        with_world(from_dict({'segments': [{'arc': {'radius': 0.3, 'angle_deg': 90}}]}, 't'),
+                   WORLDS['duckietown'])
+
+
+def test_the_track_says_its_curvature_and_the_simulator_where_the_robot_is_in_its_lane():
+    track = Track(segments=[{'straight': 1.0}, {'arc': {'radius': 0.5, 'angle_deg': 90}},
+                            {'arc': {'radius': 2.0, 'angle_deg': -45}}])
+    quarter = 0.5 * math.pi / 2
+    assert [track.curvature_at(s) for s in (0.5, 1.0 + quarter / 2, 1.0 + quarter + 0.1, 99)] \
+        == [0.0, 2.0, -0.5, -0.5]
+    spec = from_dict(dict(SHORT), 'short')
+    sim = TrackSimulator(spec, StandInRospy(SimClock(), quiet=True), start_offset=0.04,
+                         start_yaw=math.radians(-10))
+    offset, heading, curvature = sim.truth()
+    assert (offset, math.degrees(heading), curvature) == pytest.approx((0.04, -10.0, 0.0))
+
+
+def test_estimate_metrics_compare_the_estimate_with_the_truth():
+    readings = [  # truth (offset, heading, k), estimate (offset, heading, k)
+        (0.00, 0.0, 0.0, 0.01, math.radians(2), 0.1),
+        (0.02, 0.0, 0.0, 0.02, 0.0, -0.1),
+        (0.00, 0.0, 2.0, 0.03, math.radians(4), 1.0),  # a bend read half as tight
+        (0.01, 0.0, -4.0, 0.01, 0.0, -2.0),
+        (0.00, 0.0, 2.0, None, None, None),  # no estimate: not counted
+    ]
+    m = simulate.estimate_metrics(readings)
+    assert m['frames'] == 4 and m['of'] == 5 and m['bend_frames'] == 2
+    assert m['bend_curvature_read'] == 0.5
+    assert m['straight_curvature'] == 0.0
+    assert m['offset_error_cm'][0] == pytest.approx(0.5)
+    assert m['heading_error_deg'][0] == pytest.approx(1.0)
+    assert 'read 50% of their curvature' in simulate.describe_estimate(m)
+    assert simulate.estimate_metrics([(0.0, 0.0, 0.0, None, None, None)]) is None
+
+
+def test_simulate_drives_with_a_robot_preset_as_the_node_resolves_it(tmp_path, capsys):
+    track = os.path.join(TRACKS, 'duckietown_small_loop.yaml')
+    runs = {}
+    for name, robot in (('preset', ['--robot', 'duckiebot']), ('world', [])):
+        out = tmp_path / f'{name}.json'
+        assert simulate.main(['--track', track, '--controller', 'improved', '--time-limit', '4',
+                              '--json', str(out), *robot]) == 1  # the lap takes longer
+        runs[name] = json.loads(out.read_text())
+    # the preset's loop rate (config/duckiebot.yaml: 8 Hz), not the simulator's 4 Hz
+    assert runs['preset']['estimate']['of'] == pytest.approx(2 * runs['world']['estimate']['of'],
+                                                             abs=2)
+    assert runs['preset']['estimate']['frames'] > 25
+    assert 'estimate on' in capsys.readouterr().out
+    # the Kobuki's preset is the simulator's own settings in the lecture's world
+    kobuki, plain = tmp_path / 'k.json', tmp_path / 'p.json'
+    for out, robot in ((kobuki, ['--robot', 'kobuki']), (plain, [])):
+        simulate.main(['--track', 'corner', '--controller', 'improved', '--time-limit', '6',
+                       '--json', str(out), *robot])
+    assert json.loads(kobuki.read_text()) == json.loads(plain.read_text())
+    with pytest.raises(SystemExit) as e:
+        simulate.main(['--track', 'lecture', '--robot', 'no-such-robot'])
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert "--robot: robot 'no-such-robot' is neither" in err and 'Traceback' not in err
