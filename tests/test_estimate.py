@@ -543,6 +543,20 @@ def test_the_memory_keeps_points_where_they_are_on_the_floor():
     assert memory.local()[0].size == 0
 
 
+def test_points_added_to_the_memory_in_hand_are_the_bits_it_would_work_out_afresh():
+    rng = np.random.default_rng(3)
+    memory = LaneMemory(10.0)
+    for step in range(6):
+        memory.move(0.2, rng.uniform(-1, 1), 0.125)
+        memory.local()  # in hand (the lane's guide asks for it before the frame's points come)
+        memory.add(rng.uniform(0.1, 0.6, 50), rng.uniform(-0.2, 0.2, 50), rng.uniform(0, 1, 50))
+        kept = memory.local()
+        memory._local = None  # worked out afresh from every chunk
+        afresh = memory.local()
+        assert all(np.array_equal(a, b) for a, b in zip(kept, afresh))
+        assert kept[0].size == 50 * (step + 1)
+
+
 def test_the_memory_fits_the_centre_line_ahead_and_an_arc_round_a_u_turn():
     memory = LaneMemory(10.0)
     r = 0.5
