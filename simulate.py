@@ -22,7 +22,7 @@ usage:
     python simulate.py --track lecture --controller improved --json out.json --plot out.png
     python simulate.py --track s_bend --world duckietown --controller improved --video run.avi
     python simulate.py --track my_track.yaml --controller lecture --video run.avi
-    python simulate.py --track tools/tracks/duckietown_inner.yaml --robot duckiebot \
+    python simulate.py --track tools/tracks/duckietown_small_loop_cw.yaml --robot duckiebot \
         --controller improved                          a robot preset, as the node takes it
     python simulate.py --benchmark                     every built-in track and world
     python simulate.py --list-tracks                   the built-in tracks and worlds
@@ -445,6 +445,9 @@ def main(argv=None):
                   f'{world.camera} camera')
         return 0
     if args.benchmark:
+        if args.robot:  # its rows are the simulator's own settings, measured as such
+            fail(PROG, '--robot drives one run; --benchmark runs every track with the '
+                       "simulator's own settings for each world: leave one of them out")
         results = benchmark(max(1, args.jobs), args.seed, worlds=args.worlds)
         write_json(args.json, results)
         failed = [r for r in results if r['controller'] == 'improved' and not r['completed']]

@@ -745,3 +745,6 @@ def test_simulate_drives_with_a_robot_preset_as_the_node_resolves_it(tmp_path, c
     assert e.value.code == 2
     err = capsys.readouterr().err
     assert "--robot: robot 'no-such-robot' is neither" in err and 'Traceback' not in err
+    with pytest.raises(SystemExit) as e:
+        simulate.main(['--benchmark', '--robot', 'duckiebot'])
+    assert e.value.code == 2 and 'leave one of them out' in capsys.readouterr().err
