@@ -26,7 +26,7 @@ from dataclasses import dataclass, field, replace
 from lanelib.camera import CAMERAS
 from lanelib.files import read_yaml
 from lanelib.geometry import Mounting
-from lanelib.sim.world import WORLDS, Scene, Track, World
+from lanelib.sim.world import WORLDS, Scene, Track, World, segment_shape
 
 
 class TrackError(ValueError):
@@ -147,8 +147,7 @@ def from_dict(doc, name='track'):
     if tape >= lane:
         raise TrackError(f'{name}.tape_width must be smaller than lane_width')
     segments = _segments(doc['segments'], name)
-    if sum(seg.get('straight', 0.0) + abs(math.radians(seg['arc']['angle_deg'])) *
-           seg['arc']['radius'] if 'arc' in seg else seg['straight'] for seg in segments) > 1000:
+    if sum(segment_shape(seg)[0] for seg in segments) > 1000:
         raise TrackError(f'{name}.segments are more than 1 km long')
     track = Track(lane_width=lane, tape_width=tape, segments=segments)
     world = _world(doc.get('world', 'lecture'), f'{name}.world')

@@ -89,6 +89,15 @@ WORLDS = {
 }
 
 
+def segment_shape(seg):
+    """(length [m], curvature [1/m, + left]) of a track segment: {"straight": metres} or
+    {"arc": {"radius": m, "angle_deg": deg}}."""
+    if 'straight' in seg:
+        return float(seg['straight']), 0.0
+    radius, angle = float(seg['arc']['radius']), math.radians(float(seg['arc']['angle_deg']))
+    return radius * abs(angle), math.copysign(1.0 / radius, angle)
+
+
 @dataclass
 class Track:
     """A lane of two tape lines either side of a centre line made of straights and arcs.
@@ -110,12 +119,7 @@ class Track:
         x, y, h = self.start
         pts, s = [(x, y, h, 0.0)], 0.0
         for seg in self.segments:
-            if 'straight' in seg:
-                length, curvature = float(seg['straight']), 0.0
-            else:
-                arc = seg['arc']
-                radius, angle = float(arc['radius']), math.radians(float(arc['angle_deg']))
-                length, curvature = radius * abs(angle), math.copysign(1.0 / radius, angle)
+            length, curvature = segment_shape(seg)
             n = max(1, int(math.ceil(length / self.step)))
             ds = length / n
             for _ in range(n):
@@ -133,12 +137,7 @@ class Track:
         that s lies in; beyond the end, the last one's)."""
         start = 0.0
         for seg in self.segments:
-            if 'straight' in seg:
-                length, curvature = float(seg['straight']), 0.0
-            else:
-                radius, angle = float(seg['arc']['radius']), float(seg['arc']['angle_deg'])
-                length = radius * abs(math.radians(angle))
-                curvature = math.copysign(1.0 / radius, angle)
+            length, curvature = segment_shape(seg)
             start += length
             if s < start:
                 break
