@@ -134,10 +134,10 @@ def test_the_benchmark_drives_a_preset_with_the_settings_the_node_resolves_from_
     # `--robot duckiebot --controller improved` gives them, but the simulated camera's mounting
     from lanelib.sim.tracks import load_track, with_world
     from lanelib.sim.world import WORLDS
-    from tools.bench import preset_settings
+    from simulate import robot_settings
 
     spec = with_world(load_track('s_bend'), WORLDS['duckietown'])
-    params, improved = preset_settings('duckiebot', spec)
+    params, improved = robot_settings('duckiebot', spec)
     assert params.rate == 8  # the preset's loop rate, not the lecture's 4 Hz
     assert (improved.lane, improved.v_max, improved.roi_near, improved.bend_belief,
             improved.pitch_tolerance, improved.one_line_width) == (
@@ -167,10 +167,10 @@ def test_a_frame_read_at_half_its_width_gives_the_same_lane():
     from lanelib.camera import CAMERAS
     from lanelib.sim.tracks import load_track, with_world
     from lanelib.sim.world import WORLDS, FloorCamera, FloorMap
-    from tools.bench import preset_settings
+    from simulate import robot_settings
 
     spec = with_world(load_track('s_bend'), WORLDS['duckietown'])
-    params, improved = preset_settings('duckiebot', spec)
+    params, improved = robot_settings('duckiebot', spec)
     assert improved.read_width == 0  # the preset reads them whole (docs/benchmarks.md)
     camera = CAMERAS[spec.camera]
     view = FloorCamera(camera, spec.mounting)

@@ -55,7 +55,7 @@ import numpy as np
 
 import kobuki_lane
 from kobuki_lane import LaneFollower, LaneParams, LectureRule, detect
-from lanelib.camera import CAMERAS, LECTURE_CAMERA
+from lanelib.camera import LECTURE_CAMERA
 from lanelib.cli import check_output
 from lanelib.fast import FastPipeline, Layout
 from lanelib.improved import ImprovedController, ImprovedParams
@@ -417,20 +417,12 @@ def time_improved(frames, repeats, lane='lecture'):
     return result
 
 
-def preset_settings(robot, spec):
-    """(lecture table, improved controller's settings) as the node resolves `--robot ROBOT
-    --controller improved`, the camera's mounting the simulated one and the lane width the
-    track's: what `simulate.py --robot ROBOT --controller improved` drives with."""
-    import simulate
-
-    return simulate.robot_settings(robot, spec)
-
-
 def time_improved_driving(tracks, seed=0, robot=None, world=None):
     """The improved controller per stage as a running node uses it: every frame of
     simulate.py's closed-loop run of each track (the lecture's world, clean, or `world`), in
     turn, with the lane from the frames before; with `robot`, the preset's settings and rate
-    (preset_settings) instead of the simulator's defaults."""
+    (simulate.robot_settings: what `simulate.py --robot ROBOT` drives with) instead of the
+    simulator's defaults."""
     import simulate
 
     clock = StageClock(IMPROVED_STAGES, 'steer')
@@ -439,12 +431,11 @@ def time_improved_driving(tracks, seed=0, robot=None, world=None):
         spec = load_track(track)
         if world:
             spec = with_world(spec, WORLDS[world])
-        params, improved = preset_settings(robot, spec) if robot else (None, None)
+        params, improved = simulate.robot_settings(robot, spec) if robot else (None, None)
+        make = simulate.preset_factory(improved) if robot else simulate.controller_for
 
-        def timed(name, spec, params, improved=improved, **kwargs):
-            controller = (kobuki_lane.make_controller(name, params, CAMERAS[spec.camera],
-                                                      improved, **kwargs)
-                          if robot else simulate.controller_for(name, spec, params, **kwargs))
+        def timed(name, spec, params, make=make, **kwargs):
+            controller = make(name, spec, params, **kwargs)
             controller.mark = clock.mark
             return controller
         results.append(simulate.run(spec, 'improved', seed=seed, controller_factory=timed,
