@@ -468,13 +468,14 @@ def main(argv=None):
             mounting = read_mounting(args.mounting)
         except MountingError as e:
             fail(PROG, f'--mounting: {e}')
-        factory = functools.partial(controller_for, mounting=mounting)
     if args.robot:
         try:
             params, improved = robot_settings(args.robot, spec, args.controller, mounting)
         except ValueError as e:
             fail(PROG, f'--robot: {e}')
         factory = preset_factory(improved)
+    elif mounting:
+        factory = functools.partial(controller_for, mounting=mounting)
     limits = BaseLimits(accel=args.accel, alpha=args.accel * 4, latency=args.latency,
                         slip=args.slip, odom_noise=args.odom_noise)
     result = run(spec, args.controller, args.seed, args.video, args.plot, args.time_limit,
