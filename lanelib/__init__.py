@@ -31,6 +31,7 @@ a command line, or does anything at import time.
     lanefit        which lines are the robot's lane, and the arc that lane follows
     estimate       the lane estimate frame after frame: predict and blend
     memory         the lane memory: the centre line seen in the last seconds
+    floorpitch     the camera's pitch read from the floor's motion, with odometry
     steering       one steering law from a point of the lane to a Twist
     lanedraw       the improved controller's pictures
     geometry       the camera's mounting: pixels to floor points and back

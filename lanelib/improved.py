@@ -45,6 +45,7 @@ import numpy as np
 
 from lanelib.camera import LECTURE_CAMERA
 from lanelib.estimate import blend, follows, measure, predict
+from lanelib.floorpitch import PitchFromMotion
 from lanelib.geometry import Mounting
 from lanelib.lanedraw import draw_lane, stage_pictures
 from lanelib.lanefit import LaneFit
@@ -72,6 +73,7 @@ REGAINED = 0.75  # [lane widths] a lane found after driving blind is the one los
 # 8), and one frame's misfit (a few dashes, a far line's end: a degree or two) moves it a fifth
 # as much
 REPITCH = 0.2
+FLOOR_LAG = 0.3  # [s] with odometry, each frame is compared with the one this long before it
 # the gates (turn_gate, shift_gate) defend a lane once this many frames' lanes have followed it
 # since it was found: until then a lane found elsewhere replaces it. A first frame, or the first
 # after driving blind, can take the wrong lines for the lane (one frame's view of a corner);
@@ -115,10 +117,17 @@ class ImprovedParams:
                                      'more the further ahead, so that lines parallel on it '
                                      'splay (or close): the lane is fitted with its lines as '
                                      'splayed as this makes them, and the pitch corrected, '
-                                     'frame after frame, by what their splay says (the '
+                                     'frame after frame, by what pitch_from says (the '
                                      "correction: pitch_error_deg in the decision records); 0: "
                                      'the mounting as given, the lines parallel', 'deg',
                                      between(0, 30))
+    pitch_from: str = setting('splay', 'what the pitch correction (pitch_tolerance) is read '
+                              "from: 'splay' (how far the lane's two lines splay, each frame "
+                              "with both in view) or 'motion' (while odometry comes, how the "
+                              "floor's tape moves between frames 0.3 s apart: it reads corners "
+                              'as well as straights, where the splay takes a corner ahead for '
+                              'a pitch; without odometry, the splay)',
+                              choices=('splay', 'motion'))
     read_width: int = setting(0, 'frames wider than this are shrunk to this width (the height '
                               'in proportion, the camera matrix with them) before they are '
                               'read, and the pictures are drawn at that size: a quarter of the '
@@ -283,6 +292,10 @@ class ImprovedController:
         # [deg] the camera looks this much further down than the mounting says, as the lane's
         # lines say (pitch_tolerance); a property of the camera, so kept when the lane is lost
         self.pitch_error = 0.0
+        # pitch_from 'motion', with odometry: the correction from the floor's motion
+        self.floor_pitch = (PitchFromMotion(self.p.mounting, self.p.pitch_tolerance, FLOOR_LAG)
+                            if (self.p.pitch_tolerance and self.p.pitch_from == 'motion' and
+                                odometry is not None) else None)
         self.reset()
 
     def tuned_settings(self):
@@ -426,7 +439,7 @@ class ImprovedController:
             self.ever_seen = True
             if meas.left and meas.right:  # one line's fit gives no width, only the one given
                 self.width = meas.width
-                if p.pitch_tolerance:
+                if p.pitch_tolerance and (self.floor_pitch is None or moved is None):
                     self.learn_pitch(meas)
             self.lost_for, self.search = 0.0, None
             self.confirmed = self.confirmed + 1 if current else 0
@@ -441,6 +454,9 @@ class ImprovedController:
                 self.search[2] += dt
         if self.memory is not None and meas is not None:
             self.memory.add(*meas.points)
+        if self.floor_pitch is not None:
+            self.floor_pitch.value = self.pitch_error
+            self.pitch_error = self.floor_pitch.read(detection.pieces, made, moved, dt)
         command = self.command()
         self.last = (command.linear_x, command.angular_z)
         self.mark('steer')
