@@ -28,7 +28,8 @@ every built-in track, with offsets, noise, a lighting gradient and gaps), prints
               world) in turn, as a running node reads them, with the lane from the frames
               before (the prior's refit, the memory, the bend), which costs more than a fresh
               frame (--quick: the lecture track only); and the same with the settings
-              --robot duckiebot gives, on the duckietown world's S-bends (--quick: s_bend)
+              --robot duckiebot gives, on the duckietown world's S-bends (--quick: s_bend),
+              and those again with the base's odometry followed and --pitch-from motion
   worst case  cluttered frames (dense texture, many edges; plain floor with up to 1,600
               lines): the lecture's Hough stage, the improved controller's whole frame
 
@@ -49,6 +50,7 @@ import os
 import subprocess
 import sys
 import time
+from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -417,12 +419,13 @@ def time_improved(frames, repeats, lane='lecture'):
     return result
 
 
-def time_improved_driving(tracks, seed=0, robot=None, world=None):
+def time_improved_driving(tracks, seed=0, robot=None, world=None, odometry=False, **settings):
     """The improved controller per stage as a running node uses it: every frame of
     simulate.py's closed-loop run of each track (the lecture's world, clean, or `world`), in
     turn, with the lane from the frames before; with `robot`, the preset's settings and rate
     (simulate.robot_settings: what `simulate.py --robot ROBOT` drives with) instead of the
-    simulator's defaults."""
+    simulator's defaults, and `settings` (the preset's, changed); with `odometry`, the
+    base's odometry followed (simulate.py --odometry)."""
     import simulate
 
     clock = StageClock(IMPROVED_STAGES, 'steer')
@@ -432,6 +435,8 @@ def time_improved_driving(tracks, seed=0, robot=None, world=None):
         if world:
             spec = with_world(spec, WORLDS[world])
         params, improved = simulate.robot_settings(robot, spec) if robot else (None, None)
+        if settings:
+            improved = replace(improved, **settings)
         make = simulate.preset_factory(improved) if robot else simulate.controller_for
 
         def timed(name, spec, params, make=make, **kwargs):
@@ -439,7 +444,7 @@ def time_improved_driving(tracks, seed=0, robot=None, world=None):
             controller.mark = clock.mark
             return controller
         results.append(simulate.run(spec, 'improved', seed=seed, controller_factory=timed,
-                                    params=params))
+                                    params=params, odometry=odometry))
     result = {stage: stats(t) for stage, t in clock.times.items()}
     result.update(tracks=list(tracks), frames=len(clock.times['total']),
                   completed=[r['completed'] for r in results])
@@ -584,6 +589,11 @@ def main(argv=None):
     print(f"\nimproved controller driving with --robot duckiebot (simulate.py, the duckietown "
           f"world, {', '.join(tracks)}: {drive['frames']} frames in turn; the simulated "
           'camera\'s mounting, as --mounting gives it):')
+    print(stage_table(drive))
+    report['improved_driving_duckiebot_odometry'] = drive = time_improved_driving(
+        tracks, robot='duckiebot', world='duckietown', odometry=True, pitch_from='motion')
+    print(f"\nthe same with the base's odometry and --pitch-from motion (the pitch read from "
+          f"the floor's motion, timed in 'steer'): {drive['frames']} frames:")
     print(stage_table(drive))
     report['worst_case'] = worst = worst_case()
     w = worst['lecture']
