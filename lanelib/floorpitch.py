@@ -29,6 +29,7 @@ from collections import deque
 import numpy as np
 
 from lanelib.geometry import repitched
+from lanelib.robot import moved_by
 
 CAP = 0.03  # [m] a point further than this from the earlier tape counts as this far (the tape
 # left view, a piece of something else); and only points this far inside the earlier frame's
@@ -46,13 +47,11 @@ MIN_POINTS = 12  # points of the frame in the earlier frame's view: fewer say no
 
 class _Frame:
     """One frame's tape, in arrays: each piece's summary points (P, 3: colour.POINTS) and
-    colour index."""
+    colour."""
 
     def __init__(self, t, pose, made, pieces):
         self.t, self.pose, self.made = t, pose, made
-        colours = sorted({p.colour for p in pieces})
-        self.colour = np.array([colours.index(p.colour) for p in pieces])
-        self.names = colours
+        self.colour = np.array([p.colour for p in pieces])
         self.x = np.array([p.summary[0] for p in pieces]).reshape(-1, 3)
         self.y = np.array([p.summary[1] for p in pieces]).reshape(-1, 3)
         # as an earlier frame's tape: the two segments from the piece's near end through its
@@ -73,20 +72,19 @@ class PitchFromMotion:
         self.frames = deque()
         self.pose = np.zeros(3)  # x, y, yaw since the history began
         self.t = 0.0
-        self.value = 0.0
+        self.value = 0.0  # the correction held while a frame is read
         self.read_count = 0  # pairs of frames read
 
-    def read(self, pieces, made, moved, dt):
+    def read(self, pieces, made, moved, dt, held):
         """Take one frame's pieces (put on the floor with the pitch correction `made`) and how
         the robot moved since the last frame (ahead, left, turned; None without odometry, and
-        then the frames before are forgotten); return the pitch correction now held."""
+        then the frames before are forgotten); return the pitch correction `held` [deg] moved
+        by what this frame and the one `lag` before it say."""
+        self.value = held
         if moved is None:
             self.frames.clear()
             return self.value
-        px, py, yaw = self.pose
-        c, s = math.cos(yaw), math.sin(yaw)
-        self.pose = np.array([px + c * moved[0] - s * moved[1], py + s * moved[0] + c * moved[1],
-                              yaw + moved[2]])
+        self.pose = np.array(moved_by(*self.pose, *moved))
         self.t += dt
         frame = _Frame(self.t, self.pose, made, pieces)
         earlier = None
@@ -125,16 +123,12 @@ class PitchFromMotion:
         and plus STEP; None with fewer than MIN_POINTS in the earlier frame's view. The points
         counted are the same at each pitch: those between the earlier frame's nearest and
         furthest tape of their colour, along the robot's heading then, at the pitch held."""
-        names = [n for n in now.names if n in earlier.names]
-        if not names or not len(earlier.x):
+        # the present pieces and the earlier ones of the colours both frames hold
+        new, old = np.isin(now.colour, earlier.colour), np.isin(earlier.colour, now.colour)
+        if not new.any():
             return None
-        # the present points and earlier segments of each colour, by index into `names`
-        new = np.array([now.names[i] in names for i in now.colour], bool)
-        old = np.array([earlier.names[i] in names for i in earlier.colour], bool)
-        if not new.any() or not old.any():
-            return None
-        new_colour = np.repeat([names.index(now.names[i]) for i in now.colour[new]], 3)
-        old_colour = np.repeat([names.index(earlier.names[i]) for i in earlier.colour[old]], 2)
+        new_colour = np.repeat(now.colour[new], 3)  # each point's
+        old_colour = np.repeat(earlier.colour[old], 2)  # each segment's
         same = new_colour[:, None] == old_colour[None, :]
         x1, y1 = now.x[new].ravel(), now.y[new].ravel()
         x0, y0 = earlier.ends_x[old], earlier.ends_y[old]
@@ -147,9 +141,12 @@ class PitchFromMotion:
                                pitch - earlier.made)
             if keep is None:
                 along = (nx - tx) * c + (ny - ty) * s  # ahead of the robot as it was then
-                first = np.array([ex[old_colour[::2] == k].min() for k in range(len(names))])
-                last = np.array([ex[old_colour[::2] == k].max() for k in range(len(names))])
-                keep = (along > first[new_colour] + CAP) & (along < last[new_colour] - CAP)
+                first, last = np.empty(len(along)), np.empty(len(along))
+                for colour in np.unique(new_colour):  # the earlier tape's nearest and furthest
+                    reach = ex[old_colour[::2] == colour]
+                    first[new_colour == colour] = reach.min()
+                    last[new_colour == colour] = reach.max()
+                keep = (along > first + CAP) & (along < last - CAP)
                 if np.count_nonzero(keep) < MIN_POINTS:
                     return None
             ox, oy = tx + c * ex - s * ey, ty + s * ex + c * ey

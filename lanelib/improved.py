@@ -455,8 +455,8 @@ class ImprovedController:
         if self.memory is not None and meas is not None:
             self.memory.add(*meas.points)
         if self.floor_pitch is not None:
-            self.floor_pitch.value = self.pitch_error
-            self.pitch_error = self.floor_pitch.read(detection.pieces, made, moved, dt)
+            self.pitch_error = self.floor_pitch.read(detection.pieces, made, moved, dt,
+                                                     self.pitch_error)
         command = self.command()
         self.last = (command.linear_x, command.angular_z)
         self.mark('steer')

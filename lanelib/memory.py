@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 from lanelib.lanefit import fit_lanes, signed_distance
-from lanelib.robot import arc_step
+from lanelib.robot import arc_step, moved_by
 
 ENOUGH = 6  # points: fewer remembered in a stretch say nothing of it
 ACROSS = math.cos(1.4)  # a line turned more than 1.4 rad (lanefit's HEADING_LIMIT) from the
@@ -46,10 +46,7 @@ class LaneMemory:
     def move_by(self, ahead, left, turned, dt):
         """The robot moved `ahead` and `left` [m] and turned `turned` [rad] (in its frame before
         the move) in `dt` seconds: from odometry."""
-        px, py, yaw = self.pose
-        c, s = math.cos(yaw), math.sin(yaw)
-        self._moved_to(np.array([px + c * ahead - s * left, py + s * ahead + c * left,
-                                 yaw + turned]), dt)
+        self._moved_to(np.array(moved_by(*self.pose, ahead, left, turned)), dt)
 
     def _moved_to(self, pose, dt):
         """The robot is at `pose` `dt` seconds later: points older than `seconds` are gone."""

@@ -45,6 +45,13 @@ def arc_step(x, y, yaw, v, omega, dt):
     return x + r * (math.sin(yaw2) - math.sin(yaw)), y - r * (math.cos(yaw2) - math.cos(yaw)), yaw2
 
 
+def moved_by(x, y, yaw, ahead, left, turned):
+    """The pose (x, y, yaw) after moving `ahead` and `left` [m] and turning `turned` [rad] in
+    the robot's frame at (x, y, yaw): a step of odometry, composed onto a pose."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    return x + c * ahead - s * left, y + s * ahead + c * left, yaw + turned
+
+
 def could_move(distance, turn, dt, slack=2.0):
     """Whether the robot can have moved `distance` [m] and turned `turn` [rad] in `dt` [s]: at
     most `slack` times its top speeds, and 5 cm and 0.2 rad besides (odometry comes in bursts

@@ -9,6 +9,7 @@ import pytest
 from lanelib.colour import Piece
 from lanelib.floorpitch import PitchFromMotion
 from lanelib.geometry import Mounting, repitched
+from lanelib.robot import moved_by
 
 MOUNTING = Mounting(height=0.108, pitch_deg=19.15, forward=0.066)  # the Duckiebot's
 RATE = 8.0
@@ -58,19 +59,15 @@ def drive(error_deg, radius, frames=40, speed=0.25, tolerance=4.0, odometry=True
     reader = PitchFromMotion(MOUNTING, tolerance, lag=0.3)
     ds = speed / RATE
     turn = 0.0 if radius is None else ds / radius
-    pose, values = np.zeros(3), []
+    step = (ds, 0.0, 0.0) if radius is None else (radius * math.sin(turn),
+                                                  radius * (1 - math.cos(turn)), turn)
+    pose, values = (0.0, 0.0, 0.0), [0.0]
     for i in range(frames):
-        moved = None if i == 0 or not odometry else (
-            (ds, 0.0, 0.0) if radius is None else
-            (radius * math.sin(turn), radius * (1 - math.cos(turn)), turn))
         if i:
-            c, s = math.cos(pose[2]), math.sin(pose[2])
-            a, left, t = moved or ((ds, 0.0, 0.0) if radius is None else
-                                   (radius * math.sin(turn), radius * (1 - math.cos(turn)), turn))
-            pose = pose + np.array([c * a - s * left, s * a + c * left, t])
-        values.append(reader.read(drawn_pieces(pose, error_deg, radius), 0.0, moved,
-                                  1.0 / RATE))
-    return values
+            pose = moved_by(*pose, *step)
+        values.append(reader.read(drawn_pieces(pose, error_deg, radius), 0.0,
+                                  step if i and odometry else None, 1.0 / RATE, values[-1]))
+    return values[1:]
 
 
 def test_the_drawing_is_what_the_reader_undoes():
