@@ -192,6 +192,10 @@ class LectureRule:
     def extra(self):
         return {}
 
+    def notice(self):
+        """Something to tell the user while it runs (the rule has nothing to say)."""
+        return None
+
     def tuned_settings(self):
         """The settings live tuning may change (lanelib/tuning.py)."""
         return self.p
@@ -282,6 +286,9 @@ class LaneFollower:
             self.tuning.apply()  # a setting changed live (lanelib/tuning.py): from this frame
         detection = self.controller.perceive(frame, keep_stages=self.outputs.wants_stages())
         command = self.controller(detection, read_at)
+        notice = self.controller.notice()  # once, when there is something to tell the user
+        if notice:
+            ros.logwarn('%s', notice)
         late = ros.get_time() - read_at > self.base.safety.watchdog
         held = self.base.held
         if late or held:

@@ -74,6 +74,13 @@ REGAINED = 0.75  # [lane widths] a lane found after driving blind is the one los
 # as much
 REPITCH = 0.2
 FLOOR_LAG = 0.3  # [s] with odometry, each frame is compared with the one this long before it
+# [s] the pitch correction held at its limit (pitch_tolerance) this long says the camera is
+# further off its mounting than the correction may go, and the controller says so, once
+# (notice). In the project's simulator, told the camera's pitch, the correction reached its 4
+# degree limit for at most 1.6 s on end (the splay's drift in tight corners); told 6 degrees
+# off, it sat there from the first seconds, for 5 to 18 s on end (docs/benchmarks.md,
+# forty-third session)
+PITCH_NOTICE = 5.0
 # the gates (turn_gate, shift_gate) defend a lane once this many frames' lanes have followed it
 # since it was found: until then a lane found elsewhere replaces it. A first frame, or the first
 # after driving blind, can take the wrong lines for the lane (one frame's view of a corner);
@@ -118,8 +125,10 @@ class ImprovedParams:
                                      'splay (or close): the lane is fitted with its lines as '
                                      'splayed as this makes them, and the pitch corrected, '
                                      'frame after frame, by what pitch_from says (the '
-                                     "correction: pitch_error_deg in the decision records); 0: "
-                                     'the mounting as given, the lines parallel', 'deg',
+                                     "correction: pitch_error_deg in the decision records; "
+                                     'held at this limit for 5 s, a warning that the camera is '
+                                     'further off); 0: the mounting as given, the lines '
+                                     'parallel', 'deg',
                                      between(0, 30))
     pitch_from: str = setting('splay', 'what the pitch correction (pitch_tolerance) is read '
                               "from: 'splay' (how far the lane's two lines splay, each frame "
@@ -296,6 +305,8 @@ class ImprovedController:
         self.floor_pitch = (PitchFromMotion(self.p.mounting, self.p.pitch_tolerance, FLOOR_LAG)
                             if (self.p.pitch_tolerance and self.p.pitch_from == 'motion' and
                                 odometry is not None) else None)
+        self.at_limit = 0.0  # [s] the correction has been at its limit, on end
+        self.pitch_notice = None  # what notice() said about it, once said
         self.reset()
 
     def tuned_settings(self):
@@ -311,6 +322,22 @@ class ImprovedController:
     def warnings(self):
         """What to say at start about these settings (speeds above the Kobuki's)."""
         return self.params.clipped(self.p.lane_width)
+
+    def notice(self):
+        """What to tell the user now, once, or None: that the pitch correction has been at its
+        limit for PITCH_NOTICE seconds (the camera is pitched further off its mounting than
+        pitch_tolerance lets the controller correct: the lane it finds is drawn wrongly)."""
+        if self.pitch_notice is not None or self.at_limit < PITCH_NOTICE:
+            return None
+        p, e = self.p, self.pitch_error
+        self.pitch_notice = (
+            f"the camera's pitch correction has been at its limit ({e:+g} deg, "
+            f"pitch_tolerance) for {self.at_limit:.0f} s: the camera looks {abs(e):g} degrees or "
+            f"more {'further down' if e > 0 else 'less far down'} than the mounting's "
+            f"{p.mounting.pitch_deg:g} degrees, and the lane is drawn on the floor wrongly; "
+            'measure the mounting (python calibration.py --ground) and give it with '
+            '--mounting, or allow more with --pitch-tolerance')
+        return self.pitch_notice
 
     def reset(self):
         """Forget the lane: the next frame is read as if it were the first."""
@@ -457,6 +484,8 @@ class ImprovedController:
         if self.floor_pitch is not None:
             self.pitch_error = self.floor_pitch.read(detection.pieces, made, moved, dt,
                                                      self.pitch_error)
+        limited = p.pitch_tolerance and abs(self.pitch_error) >= p.pitch_tolerance - 1e-9
+        self.at_limit = self.at_limit + dt if limited else 0.0
         command = self.command()
         self.last = (command.linear_x, command.angular_z)
         self.mark('steer')

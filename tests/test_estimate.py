@@ -339,6 +339,45 @@ def test_a_camera_pitched_off_its_mounting_is_corrected_from_the_splay_of_the_li
     assert abs(math.degrees(two.heading)) > 2.0 and abs(math.degrees(one.heading)) > 1.0
 
 
+def test_a_camera_pitched_beyond_the_tolerance_is_told_once():
+    """The correction held at its limit for improved.PITCH_NOTICE seconds says, once, that the
+    camera is further off its mounting than pitch_tolerance lets it correct, which way, and
+    what to do; a camera within the tolerance, or no correction at all, says nothing."""
+    from lanelib.geometry import Mounting
+    from lanelib.improved import PITCH_NOTICE
+
+    w = DT.lane_width
+    given = Mounting(0.108, 19.15, 0.066)
+    matrix = np.array([[320.0, 0, 320], [0, 320.0, 240], [0, 0, 1]])
+    mounted = dict(lane='duckietown', memory=0.0, camera_height=0.108, camera_pitch=19.15,
+                   camera_forward=0.066, one_line_width='measured', smoothing=1.0)
+    for off, tolerance, told in ((6.0, 4.0, True), (-6.0, 4.0, True), (2.0, 4.0, False),
+                                 (6.0, 0.0, False)):
+        camera = Mounting(0.108, 19.15 + off, 0.066)
+        lines = (line_pieces(0.01 + w / 2, 'yellow', along=(0.15, 0.7), dashed=True) +
+                 line_pieces(0.01 - w / 2, 'white', along=(0.15, 0.7)))
+        seen = frame(seen_through(lines, matrix, camera, given))
+        ctl = ImprovedController(LaneParams(), ImprovedParams(**mounted,
+                                                              pitch_tolerance=tolerance))
+        said, held = [], []
+        for _ in range(60):  # 15 s at the lecture's 4 Hz
+            ctl(seen, None)
+            ctl.sent(SimpleNamespace(linear_x=0.0, angular_z=0.0))
+            said.append(ctl.notice())
+            held.append(ctl.at_limit)
+        notices = [i for i, text in enumerate(said) if text]
+        if not told:
+            assert notices == [] and abs(ctl.pitch_error) < 4.0
+            continue
+        assert abs(ctl.pitch_error) == 4.0
+        # once: on the first frame after PITCH_NOTICE seconds at the limit
+        assert notices == [next(i for i, t in enumerate(held) if t >= PITCH_NOTICE)]
+        text = said[notices[0]]
+        assert ('further down' if off > 0 else 'less far down') in text
+        assert f'({ctl.pitch_error:+g} deg' in text and '19.15 degrees' in text
+        assert 'calibration.py --ground' in text and '--pitch-tolerance' in text
+
+
 def test_follows_compares_the_headings_at_the_robot():
     from lanelib.estimate import follows
 

@@ -152,6 +152,23 @@ def test_the_controller_is_told_what_went_to_the_wheels():
     assert told[3] == STOP
 
 
+def test_what_the_controller_has_to_tell_is_logged_as_a_warning_when_it_says_it():
+    """A controller's notice (the improved controller's pitch correction held at its limit)
+    goes to the log as a warning, on the frame it comes, and only then."""
+    class Telling(Scripted):
+        def notice(self):
+            return 'the camera is pitched off' if self.frames == 3 else None
+
+        def __call__(self, detection, t=None):
+            self.frames = getattr(self, 'frames', 0) + 1
+            return super().__call__(detection, t)
+
+    ros, follower = make(ListSource(blank_frames(6)), Telling(lambda d: STOP))
+    follower.run()
+    warned = [(level, text) for level, text in ros.log_lines if 'pitched off' in text]
+    assert warned == [('WARN', 'the camera is pitched off')]
+
+
 def test_a_frame_that_takes_too_long_is_acted_on_with_a_stop():
     holder = {}
 

@@ -185,6 +185,9 @@ class FaultyController:
     def extra(self):
         return self.inner.extra()
 
+    def notice(self):
+        return self.inner.notice()
+
     def sent(self, command):
         self.inner.sent(command)
 
