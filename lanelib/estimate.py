@@ -83,17 +83,20 @@ def half_curvature(k, b):
 
 
 def measure(pieces, profile, p, prior=None, anchor=None, prior_first=False, width=None,
-            expected=None):
+            expected=None, splay=True):
     """One frame's LaneEstimate from pieces of line with their colours, or None (module doc);
     and the lanefit.LaneFit it rests on (or None). p: ImprovedParams in metres; prior: the
     arc (e, psi, k) of the lane expected; anchor: (offset, heading) of the lane expected at
     the robot, if known better than the prior's; prior_first: try the prior alone first (it
     was the lane the frame before: lanefit.find_lane); width: the width between the lines last
     measured with both in view: one line alone lies half of it from the lane's centre
-    (default: the profile's). With p.pitch_tolerance the lines may splay (lanefit._halves)."""
+    (default: the profile's). With p.pitch_tolerance the lines may splay (lanefit._halves),
+    unless `splay` is False: the pitch is read otherwise (from the floor's motion), and lines
+    parallel on the floor are drawn parallel."""
     # a pitch off by d stretches the floor drawn by about 1 + tan(d) x / h at x ahead (h the
     # camera's height): the width between the lines changes by lane_width tan(d) / h a metre
-    spread_limit = p.lane_width * math.tan(math.radians(p.pitch_tolerance)) / p.camera_height
+    spread_limit = (p.lane_width * math.tan(math.radians(p.pitch_tolerance)) / p.camera_height
+                    if splay else 0.0)
     fit = find_lane(pieces, profile, p.lane_width, prior, width_tolerance=p.width_tolerance,
                     anchor=anchor, prior_first=prior_first, width=width,
                     spread_limit=spread_limit, expected=expected)

@@ -135,7 +135,8 @@ class ImprovedParams:
                               "with both in view) or 'motion' (while odometry comes, how the "
                               "floor's tape moves between frames 0.3 s apart: it reads corners "
                               'as well as straights, where the splay takes a corner ahead for '
-                              'a pitch; without odometry, the splay)',
+                              'a pitch, and the lines are fitted parallel; without odometry, '
+                              'the splay)',
                               choices=('splay', 'motion'))
     read_width: int = setting(0, 'frames wider than this are shrunk to this width (the height '
                               'in proportion, the camera matrix with them) before they are '
@@ -448,8 +449,13 @@ class ImprovedController:
         blind = self.lost_for > p.lost_timeout  # the estimate from before is stale
         current = prior is not None and not blind  # the prediction stands for this frame
         expected = (prior.curvature, p.bend_belief / w) if p.bend_belief and current else None
+        # with the pitch read from the floor's motion the lines are fitted parallel, as they lie
+        # on the floor: a splay allowed too took part of a corner ahead for one (the project's
+        # simulator, inner loop: docs/benchmarks.md, forty-third session)
+        from_motion = self.floor_pitch is not None and moved is not None
         meas, fit = measure(pieces, self.profile, p, guide, anchor, self.held,
-                            self.width if p.one_line_width == 'measured' else None, expected)
+                            self.width if p.one_line_width == 'measured' else None, expected,
+                            splay=not from_motion)
         self.mark('lane')
         if meas is not None and current and not follows(prior, meas, p.turn_gate, p.shift_gate):
             if self.confirmed >= CONFIRMED:
@@ -466,7 +472,7 @@ class ImprovedController:
             self.ever_seen = True
             if meas.left and meas.right:  # one line's fit gives no width, only the one given
                 self.width = meas.width
-                if p.pitch_tolerance and (self.floor_pitch is None or moved is None):
+                if p.pitch_tolerance and not from_motion:
                     self.learn_pitch(meas)
             self.lost_for, self.search = 0.0, None
             self.confirmed = self.confirmed + 1 if current else 0

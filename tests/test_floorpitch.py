@@ -103,9 +103,11 @@ def test_the_controller_reads_the_pitch_from_motion_only_while_odometry_comes():
     """The duckiebot preset with pitch_from 'motion' in the project's simulator (the inner
     lane's tight corners), its camera looking 2 degrees further down than it is told: with the
     base's odometry the correction is within a quarter of a degree of 2 after 5 s, corners and
-    all; without it, or with pitch_from 'splay', no reader is made (the splay's correction)."""
+    all, and the lane's lines are fitted parallel (no spread); without it, or with pitch_from
+    'splay', no reader is made (the splay's correction, the lines fitted splayed)."""
     from dataclasses import replace
 
+    import lanelib.improved as improved_module
     import simulate
 
     spec = simulate.load_track('tools/tracks/duckietown_small_loop_cw.yaml')
@@ -120,10 +122,27 @@ def test_the_controller_reads_the_pitch_from_motion_only_while_odometry_comes():
         made.append(simulate.preset_factory(improved)(name, spec, params, odometry=odometry))
         return made[-1]
 
+    spreads = []
+    measure = improved_module.measure
+
+    def measured(*args, **kwargs):
+        meas, fit = measure(*args, **kwargs)
+        spreads.append(None if meas is None else meas.spread)
+        return meas, fit
+
     for odometry in (True, False):
-        simulate.run(spec, 'improved', seed=0, controller_factory=factory, params=params,
-                     time_limit=5.0, odometry=odometry)
+        spreads.clear()
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setattr(improved_module, 'measure', measured)
+            simulate.run(spec, 'improved', seed=0, controller_factory=factory, params=params,
+                         time_limit=5.0, odometry=odometry)
         assert (made[-1].floor_pitch is not None) == odometry
+        seen = [s for s in spreads[2:] if s is not None]  # (the first frames have no motion)
+        assert len(seen) > 20
+        if odometry:
+            assert all(s == 0.0 for s in seen)
+        else:
+            assert sum(s != 0.0 for s in seen) > len(seen) / 2
     assert made[0].pitch_error == pytest.approx(2.0, abs=0.25)
     improved = replace(preset, pitch_from='splay')
     simulate.run(spec, 'improved', seed=0, controller_factory=factory, params=params,
