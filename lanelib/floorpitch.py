@@ -29,7 +29,7 @@ from collections import deque
 import numpy as np
 
 from lanelib.geometry import repitched
-from lanelib.robot import moved_by
+from lanelib.robot import moved_by, seen_from
 
 CAP = 0.03  # [m] a point further than this from the earlier tape counts as this far (the tape
 # left view, a piece of something else); and only points this far inside the earlier frame's
@@ -98,10 +98,7 @@ class PitchFromMotion:
 
     def _step(self, earlier, now):
         """Move the pitch held towards where this pair of frames puts it."""
-        # the earlier frame's robot frame in the present one
-        dx, dy = earlier.pose[0] - now.pose[0], earlier.pose[1] - now.pose[1]
-        c, s = math.cos(now.pose[2]), math.sin(now.pose[2])
-        motion = c * dx + s * dy, -s * dx + c * dy, earlier.pose[2] - now.pose[2]
+        motion = seen_from(now.pose, earlier.pose)  # the earlier robot frame in the present one
         if math.hypot(motion[0], motion[1]) + TURN_REACH * abs(motion[2]) < MIN_MOVE:
             return
         costs = self.misses(earlier, now, motion)

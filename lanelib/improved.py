@@ -53,7 +53,7 @@ from lanelib.lanes import load_lane
 from lanelib.memory import LaneMemory
 from lanelib.mounting import BOUNDS as MOUNTING
 from lanelib.perception import FloorView, perceive, repitched_pieces
-from lanelib.robot import MAX_ANGULAR, MAX_LINEAR, STOP, Command, could_move
+from lanelib.robot import MAX_ANGULAR, MAX_LINEAR, STOP, Command, could_move, seen_from
 from lanelib.settings import between, finite, fraction, non_negative, positive, setting
 from lanelib.steering import steer
 
@@ -394,12 +394,11 @@ class ImprovedController:
         last, self.odom_pose = self.odom_pose, pose
         if pose is None or last is None:
             return None
-        dx, dy = pose[0] - last[0], pose[1] - last[1]
-        c, s = math.cos(last[2]), math.sin(last[2])
-        turned = math.atan2(math.sin(pose[2] - last[2]), math.cos(pose[2] - last[2]))
-        if not could_move(math.hypot(dx, dy), turned, dt):
+        ahead, left, turned = seen_from(last, pose)
+        turned = math.atan2(math.sin(turned), math.cos(turned))
+        if not could_move(math.hypot(ahead, left), turned, dt):
             return None  # odometry took a new origin since the last frame: not a motion
-        return c * dx + s * dy, -s * dx + c * dy, turned
+        return ahead, left, turned
 
     def __call__(self, detection, t=None):
         """The command for one frame's detection; t: when the frame was read [s] (ROS time)."""

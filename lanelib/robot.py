@@ -52,6 +52,15 @@ def moved_by(x, y, yaw, ahead, left, turned):
     return x + c * ahead - s * left, y + s * ahead + c * left, yaw + turned
 
 
+def seen_from(origin, pose):
+    """(ahead, left, turned): `pose` (x, y, yaw) in the robot's frame at `origin` (x, y, yaw),
+    moved_by's inverse: how far the robot at `origin` must move and turn to be at `pose`. The
+    turn is the yaws' plain difference (a caller that needs it within +-pi wraps it)."""
+    dx, dy = pose[0] - origin[0], pose[1] - origin[1]
+    c, s = math.cos(origin[2]), math.sin(origin[2])
+    return c * dx + s * dy, -s * dx + c * dy, pose[2] - origin[2]
+
+
 def could_move(distance, turn, dt, slack=2.0):
     """Whether the robot can have moved `distance` [m] and turned `turn` [rad] in `dt` [s]: at
     most `slack` times its top speeds, and 5 cm and 0.2 rad besides (odometry comes in bursts

@@ -9,7 +9,7 @@ import pytest
 from lanelib.colour import Piece
 from lanelib.floorpitch import PitchFromMotion
 from lanelib.geometry import Mounting, repitched
-from lanelib.robot import moved_by
+from lanelib.robot import moved_by, seen_from
 
 MOUNTING = Mounting(height=0.108, pitch_deg=19.15, forward=0.066)  # the Duckiebot's
 RATE = 8.0
@@ -68,6 +68,15 @@ def drive(error_deg, radius, frames=40, speed=0.25, tolerance=4.0, odometry=True
         values.append(reader.read(drawn_pieces(pose, error_deg, radius), 0.0,
                                   step if i and odometry else None, 1.0 / RATE, values[-1]))
     return values[1:]
+
+
+def test_a_pose_seen_from_another_is_the_step_that_leads_there():
+    # the robot at (1, 2) facing +y moves 0.3 m ahead and 0.1 m to its left (-x), turning 0.2
+    origin = (1.0, 2.0, math.pi / 2)
+    assert seen_from(origin, (0.9, 2.3, math.pi / 2 + 0.2)) == pytest.approx((0.3, 0.1, 0.2))
+    for step in ((0.05, -0.01, 0.3), (-0.2, 0.4, -2.5), (0.0, 0.0, 0.0)):
+        for start in ((0.0, 0.0, 0.0), (-3.0, 1.5, 2.9), (2.0, -1.0, -1.2)):
+            assert seen_from(start, moved_by(*start, *step)) == pytest.approx(step)
 
 
 def test_the_drawing_is_what_the_reader_undoes():
