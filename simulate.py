@@ -346,6 +346,9 @@ def build_parser():
     scene.add_argument('--odom-noise', type=ranged(0, 1), default=0.0,
                        help="with --odometry: sigma of odometry's turn rate error [rad/s], "
                             '0 to 1')
+    scene.add_argument('--turn-response', type=ranged(0.3, 2), default=1.0,
+                       help='the base turns this share of the turn asked, 0.3 to 2 (default 1: '
+                            "as asked; gym-duckietown's Duckiebot turns about 0.6 of it)")
     board = parser.add_argument_group('a chessboard on the floor, for calibration.py --ground')
     board.add_argument('--chessboard', metavar='FILE',
                        help="write what the track's camera, mounted as it is, sees of a "
@@ -477,7 +480,8 @@ def main(argv=None):
     elif mounting:
         factory = functools.partial(controller_for, mounting=mounting)
     limits = BaseLimits(accel=args.accel, alpha=args.accel * 4, latency=args.latency,
-                        slip=args.slip, odom_noise=args.odom_noise)
+                        slip=args.slip, odom_noise=args.odom_noise,
+                        turn_response=args.turn_response)
     result = run(spec, args.controller, args.seed, args.video, args.plot, args.time_limit,
                  args.keep_going, args.start_offset, math.radians(args.start_yaw), limits,
                  factory, args.odometry, params)

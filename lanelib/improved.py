@@ -53,7 +53,15 @@ from lanelib.lanes import load_lane
 from lanelib.memory import LaneMemory
 from lanelib.mounting import BOUNDS as MOUNTING
 from lanelib.perception import FloorView, perceive, repitched_pieces
-from lanelib.robot import MAX_ANGULAR, MAX_LINEAR, STOP, Command, could_move, seen_from
+from lanelib.robot import (
+    MAX_ANGULAR,
+    MAX_LINEAR,
+    STOP,
+    Command,
+    TurnResponse,
+    could_move,
+    seen_from,
+)
 from lanelib.settings import between, finite, fraction, non_negative, positive, setting
 from lanelib.steering import steer
 
@@ -138,6 +146,14 @@ class ImprovedParams:
                               'a pitch, and the lines are fitted parallel; without odometry, '
                               'the splay)',
                               choices=('splay', 'motion'))
+    turn_gain: str = setting('assumed', "how much of a turn asked for the base turns: "
+                             "'assumed' (all of it, as a base that controls its wheels' speed "
+                             "does) or 'measured' (while odometry comes, the ratio of the turns "
+                             'it reports to the turns asked for, over blocks of a second, and '
+                             'each turn asked for divided by it: a base that turns less than '
+                             "asked, as gym-duckietown's Duckiebot turns 0.6 of it, is asked "
+                             'for more; at most omega_max)',
+                             choices=('assumed', 'measured'))
     read_width: int = setting(0, 'frames wider than this are shrunk to this width (the height '
                               'in proportion, the camera matrix with them) before they are '
                               'read, and the pictures are drawn at that size: a quarter of the '
@@ -308,6 +324,11 @@ class ImprovedController:
                                 odometry is not None) else None)
         self.at_limit = 0.0  # [s] the correction has been at its limit, on end
         self.pitch_notice = None  # what notice() said about it, once said
+        # turn_gain 'measured', with odometry: how much of a turn asked for the base turns (a
+        # property of the base, so kept when the lane is lost)
+        self.turning = (TurnResponse() if self.p.turn_gain == 'measured' and odometry is not None
+                        else None)
+        self.asked = 0.0  # [rad/s] the turn rate last sent to the wheels
         self.reset()
 
     def tuned_settings(self):
@@ -406,6 +427,8 @@ class ImprovedController:
         dt = self.elapsed(t)
         self.cluttered = detection.cluttered
         moved = self.moved(t, dt)  # by odometry: (ahead, left, turned); else dead reckoning
+        if self.turning is not None and moved is not None:
+            self.turning.update(moved[2], self.asked * dt, dt)
         if moved is None:
             ds, dtheta = self.last[0] * dt, self.last[1] * dt
         else:
@@ -492,7 +515,10 @@ class ImprovedController:
         limited = p.pitch_tolerance and abs(self.pitch_error) >= p.pitch_tolerance - 1e-9
         self.at_limit = self.at_limit + dt if limited else 0.0
         command = self.command()
-        self.last = (command.linear_x, command.angular_z)
+        if self.turning is not None:  # a base that turns less than asked is asked for more
+            command = replace(command, angular_z=float(np.clip(
+                command.angular_z / self.turning.gain, -p.omega_max, p.omega_max)))
+        self.sent(command)
         self.mark('steer')
         return command
 
@@ -610,8 +636,11 @@ class ImprovedController:
     def sent(self, command):
         """The command that went to the wheels: a stop when the loop held the robot (the ROS
         master lost, a late frame, a lost camera) or a frame failed. The lane memory and the
-        prediction move with it, not with what this controller asked for."""
-        self.last = (command.linear_x, command.angular_z)
+        prediction move with it, not with what this controller asked for (with turn_gain
+        'measured', with as much of its turn as the base turns)."""
+        self.asked = command.angular_z
+        gain = 1.0 if self.turning is None else self.turning.gain
+        self.last = (command.linear_x, command.angular_z * gain)  # as the base will move
 
     def give_up(self):
         """No lane, nothing remembered ahead, the search done (or off): stop and forget."""

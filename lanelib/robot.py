@@ -69,3 +69,38 @@ def could_move(distance, turn, dt, slack=2.0):
     return (math.isfinite(distance) and math.isfinite(turn) and
             abs(distance) <= slack * MAX_LINEAR * max(dt, 0.0) + 0.05 and
             abs(turn) <= slack * MAX_ANGULAR * max(dt, 0.0) + 0.2)
+
+
+class TurnResponse:
+    """How much of the turn asked for the base turns, from odometry: the ratio of the turns it
+    reports to the turns commanded, each summed over blocks of `block` seconds (the base acts a
+    frame or two after the command, and a block of a second holds both), weighed by least
+    squares, blocks older by `memory` seconds counting e times less. `gain` is 1 (as asked)
+    until the blocks hold `evidence` rad^2 of commanded turn, then within `limits`.
+
+    A base that controls its wheels' speed turns as asked (kobuki_node), within a few per
+    cent. gym-duckietown's Duckiebot, driven through ../shared/duckietown/run.sh, turned 0.59
+    to 0.63 of it over one-second blocks (two episodes, loop_empty and zigzag_dists, 2026-12-01;
+    its speed 0.99 of the speed asked), and so did an uncalibrated wheel or a worn tyre: asked
+    for a corner, it drove a wider one."""
+
+    def __init__(self, block=1.0, memory=20.0, evidence=1.0, limits=(0.5, 2.0)):
+        self.block, self.memory, self.evidence, self.limits = block, memory, evidence, limits
+        self.turned = self.asked = self.spent = 0.0  # the block being summed
+        self.cross = self.square = 0.0  # sums over the blocks: turned x asked, asked^2
+        self.gain = 1.0
+
+    def update(self, turned, asked, dt):
+        """The base turned `turned` [rad] by odometry in the `dt` seconds in which `asked`
+        [rad] was commanded."""
+        self.turned += turned
+        self.asked += asked
+        self.spent += dt
+        if self.spent < self.block:
+            return
+        keep = math.exp(-self.spent / self.memory)
+        self.cross = keep * self.cross + self.turned * self.asked
+        self.square = keep * self.square + self.asked * self.asked
+        self.turned = self.asked = self.spent = 0.0
+        if self.square >= self.evidence:
+            self.gain = min(max(self.cross / self.square, self.limits[0]), self.limits[1])

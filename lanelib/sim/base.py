@@ -1,7 +1,8 @@
 """A Kobuki-like differential-drive base: unicycle kinematics integrated exactly along arcs, the
 Kobuki's speed limits, optional acceleration limits, the time from publish to the wheels, the
 driver's timeout (no command for 0.6 s and the base stops), and its odometry: the wheels'
-motion integrated, with slip (the wheels turn more than the robot moves) and noise."""
+motion integrated, with slip (the wheels turn more than the robot moves) and noise; and, for a
+base that does not turn as asked, the share of the turn asked that it turns."""
 
 import math
 from dataclasses import dataclass
@@ -21,6 +22,8 @@ class BaseLimits:
     latency: float = 0.05  # [s] from publish to the wheels
     slip: float = 0.0  # the wheels (and so odometry) turn this fraction more than the robot moves
     odom_noise: float = 0.0  # [rad/s] sigma of odometry's turn rate error, per 10 ms step
+    turn_response: float = 1.0  # the base turns this fraction of the turn asked (odometry says
+    # how much it did): a Duckiebot's wheels uncalibrated; gym-duckietown's turns about 0.6
 
 
 def _approach(value, target, rate_limit, dt):
@@ -66,7 +69,7 @@ class DiffDriveBase:
             v_cmd = float(np.clip(v_cmd, -lim.v_max, lim.v_max))
             w_cmd = float(np.clip(w_cmd, -lim.omega_max, lim.omega_max))
             self.v = _approach(self.v, v_cmd, lim.accel, dt)
-            self.omega = _approach(self.omega, w_cmd, lim.alpha, dt)
+            self.omega = _approach(self.omega, w_cmd * lim.turn_response, lim.alpha, dt)
             self.x, self.y, self.yaw = arc_step(self.x, self.y, self.yaw, self.v, self.omega, dt)
             turn = self.omega * (1 + lim.slip)
             if lim.odom_noise:
