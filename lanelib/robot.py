@@ -81,8 +81,8 @@ class TurnResponse:
     A base that controls its wheels' speed turns as asked (kobuki_node), within a few per
     cent. gym-duckietown's Duckiebot, driven through ../shared/duckietown/run.sh, turned 0.59
     to 0.63 of it over one-second blocks (two episodes, loop_empty and zigzag_dists, 2026-12-01;
-    its speed 0.99 of the speed asked), and so did an uncalibrated wheel or a worn tyre: asked
-    for a corner, it drove a wider one."""
+    its speed 0.99 of the speed asked): asked for a corner, it drove a wider one. A Duckiebot's
+    uncalibrated wheels may do the same (not measured here)."""
 
     def __init__(self, block=1.0, memory=20.0, evidence=1.0, limits=(0.5, 2.0)):
         self.block, self.memory, self.evidence, self.limits = block, memory, evidence, limits
