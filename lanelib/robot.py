@@ -78,11 +78,11 @@ class TurnResponse:
     squares, blocks older by `memory` seconds counting e times less. `gain` is 1 (as asked)
     until the blocks hold `evidence` rad^2 of commanded turn, then within `limits`.
 
-    A base that controls its wheels' speed turns as asked (kobuki_node), within a few per
-    cent. gym-duckietown's Duckiebot, driven through ../shared/duckietown/run.sh, turned 0.59
-    to 0.63 of it over one-second blocks (two episodes, loop_empty and zigzag_dists, 2026-12-01;
-    its speed 0.99 of the speed asked): asked for a corner, it drove a wider one. A Duckiebot's
-    uncalibrated wheels may do the same (not measured here)."""
+    A base that controls its wheels' speed (kobuki_node) is taken to turn as asked; that was
+    not measured here. gym-duckietown's Duckiebot, driven through ../shared/duckietown/run.sh,
+    turned 0.59 to 0.63 of it over one-second blocks (two episodes, loop_empty and
+    zigzag_dists, 2026-12-01; its speed 0.99 of the speed asked): asked for a corner, it drove
+    a wider one. A Duckiebot's uncalibrated wheels may do the same (not measured here)."""
 
     def __init__(self, block=1.0, memory=20.0, evidence=1.0, limits=(0.5, 2.0)):
         self.block, self.memory, self.evidence, self.limits = block, memory, evidence, limits
