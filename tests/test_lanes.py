@@ -1,6 +1,7 @@
 """Lane profiles, colour masks, pieces of tape, and the choice of the robot's own lane."""
 
 import math
+import warnings
 
 import cv2
 import numpy as np
@@ -704,3 +705,28 @@ def test_a_lane_bent_the_other_way_from_the_one_expected_is_weighed_down():
     assert held.k == pytest.approx(-3.4, abs=0.3) and math.radians(-35) < held.psi < 0
     assert set(held.sides[[c == 'y' for c, *_ in CORNER_PIECES]]) == {1}
     assert not held.sides[[c == 'w' for c, *_ in CORNER_PIECES]].any()
+
+
+@pytest.mark.parametrize('count', [7, 9, 12, 40])
+def test_the_bend_starts_parabola_is_the_weighted_least_squares_one(count):
+    """lanefit._parabola solves the normal equations about the points' mean: the same line or
+    parabola as np.polyfit's least squares (weights on the squared distances), whatever the
+    points' distance ahead; points all at one distance (a singular system) still give one."""
+    rng = np.random.default_rng(count)
+    for far in (0.3, 1.5, 4.0):
+        x = far + rng.uniform(0.0, 0.4, count)
+        y = 0.1 - 0.3 * x + 0.8 * x ** 2 + rng.normal(0, 0.01, count)
+        w = rng.uniform(0.1, 2.0, count)
+        a, slope, k = lanefit._parabola(x, y, w)
+        if count < 3 * lanefit.POINTS:
+            s, b = np.polyfit(x, y, 1, w=np.sqrt(w))
+            assert (a, slope, k) == pytest.approx((b, s, 0.0), rel=1e-6, abs=1e-9)
+            continue
+        c2, c1, c0 = np.polyfit(x, y, 2, w=np.sqrt(w))
+        middle = c1 + 2 * c2 * np.average(x, weights=w)
+        assert (a, slope, k) == pytest.approx(
+            (c0, c1, 2 * c2 / (1 + middle ** 2) ** 1.5), rel=1e-6, abs=1e-9)
+    with warnings.catch_warnings():
+        warnings.simplefilter('ignore')  # np.polyfit's RankWarning
+        out = lanefit._parabola(np.full(count, 0.5), np.linspace(0, 0.1, count), np.ones(count))
+    assert all(np.isfinite(out))
