@@ -36,8 +36,7 @@ class LaneMemory:
         self.seconds = seconds
         self.pose = np.zeros(3)  # x, y, yaw of the robot in the start frame
         self.t = 0.0
-        self.chunks = []  # (time, X, Y, weight)
-        self._local = None  # local()'s answer until the robot moves or points come or go
+        self.clear()
 
     def move(self, v, omega, dt):
         """Dead reckoning: `dt` seconds at (v [m/s], omega [rad/s])."""
@@ -52,19 +51,38 @@ class LaneMemory:
         """The robot is at `pose` `dt` seconds later: points older than `seconds` are gone."""
         self.pose = pose
         self.t += dt
-        self.chunks = [c for c in self.chunks if self.t - c[0] <= self.seconds]
+        old = 0  # frames seen longer ago than `seconds`: the first ones
+        while old < len(self.seen) and self.t - self.seen[old][0] > self.seconds:
+            old += 1
+        if old:
+            self.start += sum(count for _, count in self.seen[:old])
+            self.seen = self.seen[old:]
         self._local = None
+
+    @property
+    def points(self):
+        """(X, Y, weight) of every point remembered, in the start frame, oldest first."""
+        return self._buffer[:, self.start:self.end]
 
     def add(self, x, y, w):
         """Centre-line points seen now (robot frame)."""
         px, py, yaw = self.pose
         cos, sin = math.cos(yaw), math.sin(yaw)
-        chunk = (self.t, px + cos * x - sin * y, py + sin * x + cos * y, w)
-        self.chunks.append(chunk)
+        chunk = (px + cos * x - sin * y, py + sin * x + cos * y, w)
+        n = len(chunk[0])
+        if self.end + n > self._buffer.shape[1]:  # full: the points into a new buffer (one
+            # already handed out, local()'s weights, stays as it is)
+            live = self.points
+            self._buffer = np.empty((3, max(2 * (live.shape[1] + n), 1024)))
+            self.start, self.end = 0, live.shape[1]
+            self._buffer[:, :self.end] = live
+        self._buffer[:, self.end:self.end + n] = chunk
+        self.end += n
+        self.seen.append((self.t, n))
         if self._local is not None:  # the points in hand and the new ones, as local() would
             # make them all (each point's arithmetic is its own): the steering asks for them
             # after every add, and all of them again took a fifth of the memory's time
-            new = self._in_robot_frame(*chunk[1:])
+            new = self._in_robot_frame(*chunk)
             self._local = tuple(np.concatenate([old, more]) for old, more in zip(self._local, new))
 
     def _in_robot_frame(self, X, Y, w):
@@ -78,15 +96,17 @@ class LaneMemory:
         """All remembered points in the robot's frame now: x, y, weight (worked out once per
         pose and set of points: a frame asks for them up to three times)."""
         if self._local is None:
-            if not self.chunks:
-                return np.empty(0), np.empty(0), np.empty(0)
-            self._local = self._in_robot_frame(*(np.concatenate([c[i] for c in self.chunks])
-                                                 for i in (1, 2, 3)))
+            self._local = self._in_robot_frame(*self.points)
         return self._local
 
     def clear(self):
-        self.chunks = []
-        self._local = None
+        # every point remembered, oldest first, in one buffer (X, Y, weight): a point is added
+        # past the end and forgotten by moving the start (kept as a list of chunks, a frame's
+        # each, they were joined afresh each time the robot moved: a fifth of the memory's
+        # time); and each frame's time and how many points it gave, oldest first
+        self._buffer, self.start, self.end = np.empty((3, 0)), 0, 0
+        self.seen = []
+        self._local = None  # local()'s answer until the robot moves or points come or go
 
     def centre_line(self, near, far, min_span, outlier=None):
         """(a, b, c) of the remembered centre line fitted between near and far metres ahead,

@@ -590,10 +590,37 @@ def test_points_added_to_the_memory_in_hand_are_the_bits_it_would_work_out_afres
         memory.local()  # in hand (the lane's guide asks for it before the frame's points come)
         memory.add(rng.uniform(0.1, 0.6, 50), rng.uniform(-0.2, 0.2, 50), rng.uniform(0, 1, 50))
         kept = memory.local()
-        memory._local = None  # worked out afresh from every chunk
+        memory._local = None  # worked out afresh from every point
         afresh = memory.local()
         assert all(np.array_equal(a, b) for a, b in zip(kept, afresh))
         assert kept[0].size == 50 * (step + 1)
+
+
+def test_the_memory_keeps_the_points_of_its_last_seconds_however_its_buffer_grows():
+    """Points are added past the buffer's end, forgotten by moving its start, and moved into a
+    bigger buffer when it is full: local() is always what the frames of the last `seconds`
+    give, worked out from them afresh (each frame's points kept apart), and what it handed out
+    before stays as it was."""
+    rng = np.random.default_rng(5)
+    memory = LaneMemory(1.0)
+    frames, pose, t, handed = [], np.zeros(3), 0.0, []
+    for _ in range(80):
+        v, omega, dt = 0.2, rng.uniform(-1, 1), rng.uniform(0.05, 0.2)
+        memory.move(v, omega, dt)
+        pose, t = np.array(arc_step(*pose, v, omega, dt)), t + dt
+        frames = [f for f in frames if t - f[0] <= 1.0]
+        n = int(rng.integers(0, 200))
+        x, y, w = rng.uniform(0.1, 0.6, n), rng.uniform(-0.2, 0.2, n), rng.uniform(0, 1, n)
+        memory.add(x, y, w)
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        frames.append((t, pose[0] + c * x - s * y, pose[1] + s * x + c * y, w))
+        X, Y, W = (np.concatenate([f[i] for f in frames]) for i in (1, 2, 3))
+        dx, dy = X - pose[0], Y - pose[1]
+        got = memory.local()
+        assert np.allclose(got[0], c * dx + s * dy) and np.allclose(got[1], -s * dx + c * dy)
+        assert np.array_equal(got[2], W)
+        handed.append((got[2], W))
+    assert all(np.array_equal(a, b) for a, b in handed)  # nothing handed out was overwritten
 
 
 def test_the_memory_fits_the_centre_line_ahead_and_an_arc_round_a_u_turn():
