@@ -171,7 +171,7 @@ def test_a_frame_read_at_half_its_width_gives_the_same_lane():
 
     spec = with_world(load_track('s_bend'), WORLDS['duckietown'])
     params, improved = robot_settings('duckiebot', spec)
-    assert improved.read_width == 0  # the preset reads them whole (docs/benchmarks.md)
+    assert improved.read_width == 320  # as the preset reads them (docs/benchmarks.md)
     camera = CAMERAS[spec.camera]
     view = FloorCamera(camera, spec.mounting)
     floor = FloorMap(spec.track, spec.gaps, spec.dashes)
