@@ -620,7 +620,8 @@ class ImprovedController:
         v, omega = self.last
         self.estimate = predict(estimate, v * seconds, omega * seconds) or estimate
         if memory is not None:
-            self.memory = copy.copy(memory)  # moving it makes new arrays: the kept one stays
+            self.memory = copy.copy(memory)  # moving it rebinds its own fields: the kept
+            # one stays (their buffer is shared, and only the kept one adds to it)
             self.memory.move(v, omega, seconds)
         try:
             yield

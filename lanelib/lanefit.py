@@ -634,11 +634,12 @@ def _parabola(x, y, w):
     u = x - m
     wu = w * u
     wu2 = wu * u
+    s1, s2 = wu.sum(), wu2.sum()
     line = len(x) < 3 * POINTS
     if line:
-        normal, moments = [[sw, wu.sum()], [wu.sum(), wu2.sum()]], [w @ y, wu @ y]
+        normal, moments = [[sw, s1], [s1, s2]], [w @ y, wu @ y]
     else:
-        s1, s2, s3 = wu.sum(), wu2.sum(), wu2 @ u
+        s3 = wu2 @ u
         normal = [[sw, s1, s2], [s1, s2, s3], [s2, s3, wu2 @ (u * u)]]
         moments = [w @ y, wu @ y, wu2 @ y]
     try:
