@@ -638,14 +638,16 @@ def test_the_plots_title_has_a_band_of_its_own_above_the_track():
 TRACKS = os.path.join(os.path.dirname(__file__), '..', 'tools', 'tracks')
 
 
-def test_the_unseen_s_bends_of_the_benchmarks_load_and_turn_both_ways():
-    """tools/tracks: the S-bends docs/benchmarks.md measures the bend model on."""
+@pytest.mark.parametrize('prefix, letters', [('s_unseen', 'abc'), ('s_held', 'defgh')])
+def test_the_held_out_s_bends_of_the_benchmarks_load_and_turn_both_ways(prefix, letters):
+    """tools/tracks: the S-bends docs/benchmarks.md measures the improved controller on, drawn
+    after it was tuned (s_unseen_*) and later still (s_held_*)."""
     import yaml
 
     from lanelib.sim.tracks import load_track
     folder = TRACKS
-    names = sorted(n for n in os.listdir(folder) if n.startswith('s_unseen'))
-    assert names == ['s_unseen_a.yaml', 's_unseen_b.yaml', 's_unseen_c.yaml']
+    names = sorted(n for n in os.listdir(folder) if n.startswith(prefix + '_'))
+    assert names == [f'{prefix}_{c}.yaml' for c in letters]
     for name in names:
         with open(os.path.join(folder, name)) as f:
             angles = [s['arc']['angle_deg'] for s in yaml.safe_load(f)['segments']
