@@ -25,6 +25,8 @@ usage:
     python simulate.py --track tools/tracks/duckietown_small_loop_cw.yaml --robot duckiebot \
         --controller improved                          a robot preset, as the node takes it
     python simulate.py --benchmark                     every built-in track and world
+    python simulate.py --benchmark --tracks tools/tracks/s_*.yaml --seeds 0 1 2 3
+                                                       the S-bends drawn after tuning, every world
     python simulate.py --list-tracks                   the built-in tracks and worlds
 
 A run ends when the robot completes the track, departs the lane (its centre more than half a
@@ -218,14 +220,19 @@ def _bench_job(job):
     return result
 
 
-def benchmark(jobs=2, seed=0, stream=None, worlds=None):
+def benchmark(jobs=2, seed=0, stream=None, worlds=None, tracks=None, seeds=None):
     """Every built-in track x both controllers in the lecture's world, and the improved one in
-    every world (with that world's lane profile) under each condition."""
-    worlds = list(worlds or WORLDS)
-    work = [(t, 'lecture', c, 'clean', seed) for t in BUILTIN for c in ('lecture', 'improved')
-            if 'lecture' in worlds]
-    work += [(t, w, 'improved', v, seed) for w in worlds for v in VARIANTS
-             for t in BUILTIN if (w, v) != ('lecture', 'clean')]
+    every world (with that world's lane profile) under each condition; or, given `tracks`
+    (names or files), the improved controller on each as drawn (no condition added) in every
+    world. Once per seed of `seeds` (default: `seed`)."""
+    worlds, seeds = list(worlds or WORLDS), list(seeds or [seed])
+    if tracks:  # each track's seeds side by side
+        work = [(t, w, 'improved', 'clean', s) for w in worlds for t in tracks for s in seeds]
+    else:
+        work = [(t, 'lecture', c, 'clean', s) for s in seeds for t in BUILTIN
+                for c in ('lecture', 'improved') if 'lecture' in worlds]
+        work += [(t, w, 'improved', v, s) for s in seeds for w in worlds for v in VARIANTS
+                 for t in BUILTIN if (w, v) != ('lecture', 'clean')]
     if jobs > 1:
         from multiprocessing import Pool
 
@@ -233,16 +240,27 @@ def benchmark(jobs=2, seed=0, stream=None, worlds=None):
             results = pool.map(_bench_job, work)
     else:
         results = [_bench_job(job) for job in work]
-    (stream or sys.stdout).write(benchmark_table(results))
+    (stream or sys.stdout).write(benchmark_table(results) + benchmark_summary(results))
     return results
 
 
+def benchmark_summary(results):
+    """Per world, how many of the improved controller's runs completed."""
+    lines = []
+    for world in dict.fromkeys(r['world'] for r in results):
+        mine = [r for r in results if r['world'] == world and r['controller'] == 'improved']
+        done = sum(r['completed'] for r in mine)
+        lines.append(f'{world}: the improved controller completed {done} of {len(mine)} runs')
+    return '\n'.join(lines) + '\n'
+
+
 def benchmark_table(results):
-    rows = ['| world | track | controller | condition | completed | progress | RMS offset | '
-            'max offset | mean speed | departures | ended |',
-            '|---|---|---|---|---|---|---|---|---|---|---|']
+    rows = ['| world | track | seed | controller | condition | completed | progress | '
+            'RMS offset | max offset | mean speed | departures | ended |',
+            '|---|---|---|---|---|---|---|---|---|---|---|---|']
     for r in results:
-        rows.append(f"| {r['world']} | {r['track']} | {r['controller']} | {r['variant']} | "
+        rows.append(f"| {r['world']} | {r['track']} | {r['seed']} | {r['controller']} | "
+                    f"{r['variant']} | "
                     f"{'yes' if r['completed'] else 'no'} | {r['progress']:.0%} | "
                     f"{r['rms_offset_m'] * 100:.1f} cm | {r['max_offset_m'] * 100:.1f} cm | "
                     f"{r['mean_speed_mps']:.3f} m/s | {r['departures']} | {r['ended']} |")
@@ -368,6 +386,13 @@ def build_parser():
                             'table (--json writes all results)')
     bench.add_argument('--worlds', nargs='+', choices=sorted(WORLDS), metavar='WORLD',
                        help='with --benchmark: only these worlds')
+    bench.add_argument('--tracks', nargs='+', metavar='TRACK',
+                       help='with --benchmark: these tracks (built-in names or files) instead '
+                            'of the built-in ones, the improved controller only, each as drawn '
+                            '(no noise, gradient or gap added), in every world of --worlds; '
+                            'e.g. the S-bends drawn after tuning: --tracks tools/tracks/s_*.yaml')
+    bench.add_argument('--seeds', nargs='+', type=ranged(0, 10**9, int), metavar='SEED',
+                       help='with --benchmark: every run once per seed (default: --seed)')
     bench.add_argument('--jobs', type=ranged(1, 64, int), default=2,
                        help='parallel runs, 1 to 64 (default 2)')
     parser.add_argument('--list-tracks', action='store_true', help='list the built-in tracks')
@@ -447,11 +472,20 @@ def main(argv=None):
             print(f'world {name}: {world.floor} floor, lane profile {world.lane}, '
                   f'{world.camera} camera')
         return 0
+    if (args.tracks or args.seeds) and not args.benchmark:
+        fail(PROG, '--tracks and --seeds go with --benchmark; one run takes --track and --seed')
     if args.benchmark:
         if args.robot:  # its rows are the simulator's own settings, measured as such
             fail(PROG, '--robot drives one run; --benchmark runs every track with the '
                        "simulator's own settings for each world: leave one of them out")
-        results = benchmark(max(1, args.jobs), args.seed, worlds=args.worlds)
+        if args.tracks:
+            try:
+                for track in args.tracks:
+                    load_track(track)  # a bad file is refused before any run
+            except TrackError as e:
+                fail(PROG, f'--tracks: {e}')
+        results = benchmark(max(1, args.jobs), args.seed, worlds=args.worlds,
+                            tracks=args.tracks, seeds=args.seeds)
         write_json(args.json, results)
         failed = [r for r in results if r['controller'] == 'improved' and not r['completed']]
         if failed:

@@ -750,3 +750,33 @@ def test_simulate_drives_with_a_robot_preset_as_the_node_resolves_it(tmp_path, c
     with pytest.raises(SystemExit) as e:
         simulate.main(['--benchmark', '--robot', 'duckiebot'])
     assert e.value.code == 2 and 'leave one of them out' in capsys.readouterr().err
+
+
+def test_the_benchmark_drives_the_tracks_given_in_every_world_once_per_seed(tmp_path, capsys):
+    """--benchmark --tracks: the improved controller alone on each track as drawn, in each
+    world asked, once per seed, with a line per world of how many runs completed (how the
+    S-bends drawn after tuning are scored: docs/benchmarks.md); a bad track is refused before
+    any run, and the two options only go with --benchmark."""
+    track = tmp_path / 'short.yaml'
+    track.write_text(json.dumps(SHORT))
+    out = tmp_path / 'runs.json'
+    code = simulate.main(['--benchmark', '--tracks', str(track), '--worlds', 'lecture', 'wood',
+                          '--seeds', '0', '1', '--jobs', '1', '--json', str(out)])
+    printed = capsys.readouterr().out
+    runs = json.loads(out.read_text())
+    assert [(r['world'], r['seed'], r['controller'], r['variant']) for r in runs] == [
+        ('lecture', 0, 'improved', 'clean'), ('lecture', 1, 'improved', 'clean'),
+        ('wood', 0, 'improved', 'clean'), ('wood', 1, 'improved', 'clean')]
+    assert all(r['track'] == 'short.yaml' for r in runs)
+    assert runs[0]['rms_offset_m'] != runs[1]['rms_offset_m']  # the seeds' noise differs
+    done = {w: sum(r['completed'] for r in runs if r['world'] == w) for w in ('lecture', 'wood')}
+    assert f"lecture: the improved controller completed {done['lecture']} of 2 runs" in printed
+    assert f"wood: the improved controller completed {done['wood']} of 2 runs" in printed
+    assert code == (0 if sum(done.values()) == 4 else 1)
+    assert '| lecture | short.yaml | 1 | improved | clean |' in printed
+    for argv, message in ((['--benchmark', '--tracks', str(tmp_path / 'none.yaml')],
+                           "--tracks: '"), (['--tracks', str(track)], 'go with --benchmark'),
+                          (['--seeds', '1'], 'go with --benchmark')):
+        with pytest.raises(SystemExit) as e:
+            simulate.main(argv)
+        assert e.value.code == 2 and message in capsys.readouterr().err
