@@ -213,26 +213,29 @@ def run(spec, controller='lecture', seed=0, video=None, plot=None, time_limit=No
 # ---------------------------------------------------------------- command line
 
 def _bench_job(job):
-    track, world, controller, variant, seed = job
+    track, world, controller, variant, seed, (offset, yaw) = job
     spec = apply_variant(with_world(load_track(track), WORLDS[world]), variant)
-    result = run(spec, controller, seed=seed)
-    result['variant'] = variant
+    result = run(spec, controller, seed=seed, start_offset=offset, start_yaw=math.radians(yaw))
+    result.update(variant=variant, start_offset_m=offset, start_yaw_deg=yaw)
     return result
 
 
-def benchmark(jobs=2, seed=0, stream=None, worlds=None, tracks=None, seeds=None):
+def benchmark(jobs=2, seed=0, stream=None, worlds=None, tracks=None, seeds=None,
+              start=(0.0, 0.0)):
     """Every built-in track x both controllers in the lecture's world, and the improved one in
     every world (with that world's lane profile) under each condition; or, given `tracks`
     (names or files), the improved controller on each as drawn (no condition added) in every
-    world. Once per seed of `seeds` (default: `seed`)."""
+    world. Once per seed of `seeds` (default: `seed`); every run started `start` (offset [m],
+    yaw [deg]) off the centre line."""
     worlds, seeds = list(worlds or WORLDS), list(seeds or [seed])
     if tracks:  # each track's seeds side by side
-        work = [(t, w, 'improved', 'clean', s) for w in worlds for t in tracks for s in seeds]
+        work = [(t, w, 'improved', 'clean', s, start) for w in worlds for t in tracks
+                for s in seeds]
     else:
-        work = [(t, 'lecture', c, 'clean', s) for s in seeds for t in BUILTIN
+        work = [(t, 'lecture', c, 'clean', s, start) for s in seeds for t in BUILTIN
                 for c in ('lecture', 'improved') if 'lecture' in worlds]
-        work += [(t, w, 'improved', v, s) for s in seeds for w in worlds for v in VARIANTS
-                 for t in BUILTIN if (w, v) != ('lecture', 'clean')]
+        work += [(t, w, 'improved', v, s, start) for s in seeds for w in worlds
+                 for v in VARIANTS for t in BUILTIN if (w, v) != ('lecture', 'clean')]
     if jobs > 1:
         from multiprocessing import Pool
 
@@ -244,13 +247,24 @@ def benchmark(jobs=2, seed=0, stream=None, worlds=None, tracks=None, seeds=None)
     return results
 
 
+# the options of one run that --benchmark does not take (it refuses them rather than ignore them)
+SINGLE_RUN = ('track', 'world', 'controller', 'plot', 'video', 'time_limit', 'keep_going',
+              'noise', 'gradient', 'glare', 'gap', 'dashes', 'camera_height', 'camera_pitch',
+              'camera_roll', 'mounting', 'accel', 'latency', 'odometry', 'slip', 'odom_noise',
+              'turn_response', 'chessboard')
+FLAGS = {'keep_going': '--continue'}  # where an option's name is not its flag's
+
+
 def benchmark_summary(results):
     """Per world, how many of the improved controller's runs completed."""
     lines = []
     for world in dict.fromkeys(r['world'] for r in results):
         mine = [r for r in results if r['world'] == world and r['controller'] == 'improved']
         done = sum(r['completed'] for r in mine)
-        lines.append(f'{world}: the improved controller completed {done} of {len(mine)} runs')
+        off = {(r['start_offset_m'], r['start_yaw_deg']) for r in mine} - {(0.0, 0.0)}
+        lines.append(f'{world}: the improved controller completed {done} of {len(mine)} runs' +
+                     ''.join(f', started {o:+g} m and {y:+g} degrees off the centre line'
+                             for o, y in off))
     return '\n'.join(lines) + '\n'
 
 
@@ -347,9 +361,9 @@ def build_parser():
                        help="the improved controller's idea of the mounting, a YAML from "
                             'calibration.py --ground (default: the true one)')
     scene.add_argument('--start-offset', type=ranged(-1, 1), default=0.0,
-                       help='[m], + left, -1 to 1')
+                       help='[m], + left, -1 to 1 (with --benchmark: every run)')
     scene.add_argument('--start-yaw', type=ranged(-90, 90), default=0.0,
-                       help='[deg], + left, -90 to 90')
+                       help='[deg], + left, -90 to 90 (with --benchmark: every run)')
     scene.add_argument('--accel', type=ranged(0, 10), default=0.0,
                        help='base acceleration limit [m/s^2], 0 for none, at most 10')
     scene.add_argument('--latency', type=ranged(0, 2), default=0.05,
@@ -478,6 +492,13 @@ def main(argv=None):
         if args.robot:  # its rows are the simulator's own settings, measured as such
             fail(PROG, '--robot drives one run; --benchmark runs every track with the '
                        "simulator's own settings for each world: leave one of them out")
+        defaults = build_parser().parse_args([])
+        ignored = [FLAGS.get(name, f"--{name.replace('_', '-')}") for name in SINGLE_RUN
+                   if getattr(args, name) != getattr(defaults, name)]
+        if ignored:  # taken silently, they would not be what the table measured
+            fail(PROG, f"{', '.join(ignored)}: for one run; --benchmark drives its own tracks, "
+                       'worlds and conditions (it takes --worlds, --tracks, --seeds, --seed, '
+                       '--start-offset, --start-yaw, --jobs, --json and --force)')
         if args.tracks:
             try:
                 for track in args.tracks:
@@ -485,7 +506,8 @@ def main(argv=None):
             except TrackError as e:
                 fail(PROG, f'--tracks: {e}')
         results = benchmark(max(1, args.jobs), args.seed, worlds=args.worlds,
-                            tracks=args.tracks, seeds=args.seeds)
+                            tracks=args.tracks, seeds=args.seeds,
+                            start=(args.start_offset, args.start_yaw))
         write_json(args.json, results)
         failed = [r for r in results if r['controller'] == 'improved' and not r['completed']]
         if failed:

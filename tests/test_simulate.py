@@ -755,8 +755,9 @@ def test_simulate_drives_with_a_robot_preset_as_the_node_resolves_it(tmp_path, c
 def test_the_benchmark_drives_the_tracks_given_in_every_world_once_per_seed(tmp_path, capsys):
     """--benchmark --tracks: the improved controller alone on each track as drawn, in each
     world asked, once per seed, with a line per world of how many runs completed (how the
-    S-bends drawn after tuning are scored: docs/benchmarks.md); a bad track is refused before
-    any run, and the two options only go with --benchmark."""
+    S-bends drawn after tuning are scored: docs/benchmarks.md), every run started where
+    --start-offset and --start-yaw say; a bad track is refused before any run, the two options
+    only go with --benchmark, and the options of one run it would not use are refused."""
     track = tmp_path / 'short.yaml'
     track.write_text(json.dumps(SHORT))
     out = tmp_path / 'runs.json'
@@ -774,9 +775,21 @@ def test_the_benchmark_drives_the_tracks_given_in_every_world_once_per_seed(tmp_
     assert f"wood: the improved controller completed {done['wood']} of 2 runs" in printed
     assert code == (0 if sum(done.values()) == 4 else 1)
     assert '| lecture | short.yaml | 1 | improved | clean |' in printed
+    # every run started off the centre line, as one run's --start-offset and --start-yaw do
+    moved = tmp_path / 'moved.json'
+    simulate.main(['--benchmark', '--tracks', str(track), '--worlds', 'lecture', '--jobs', '1',
+                   '--start-offset', '0.02', '--start-yaw', '-2', '--json', str(moved)])
+    (run,) = json.loads(moved.read_text())
+    assert (run['start_offset_m'], run['start_yaw_deg'], run['seed']) == (0.02, -2.0, 0)
+    assert run['rms_offset_m'] != runs[0]['rms_offset_m']
+    assert 'started +0.02 m and -2 degrees off the centre line' in capsys.readouterr().out
     for argv, message in ((['--benchmark', '--tracks', str(tmp_path / 'none.yaml')],
                            "--tracks: '"), (['--tracks', str(track)], 'go with --benchmark'),
-                          (['--seeds', '1'], 'go with --benchmark')):
+                          (['--seeds', '1'], 'go with --benchmark'),
+                          (['--benchmark', '--noise', '5', '--continue'],
+                           '--continue, --noise: for one run; --benchmark drives its own'),
+                          (['--benchmark', '--tracks', str(track), '--controller', 'improved'],
+                           '--controller: for one run')):
         with pytest.raises(SystemExit) as e:
             simulate.main(argv)
         assert e.value.code == 2 and message in capsys.readouterr().err
