@@ -247,12 +247,16 @@ def benchmark(jobs=2, seed=0, stream=None, worlds=None, tracks=None, seeds=None,
     return results
 
 
-# the options of one run that --benchmark does not take (it refuses them rather than ignore them)
-SINGLE_RUN = ('track', 'world', 'controller', 'plot', 'video', 'time_limit', 'keep_going',
-              'noise', 'gradient', 'glare', 'gap', 'dashes', 'camera_height', 'camera_pitch',
-              'camera_roll', 'mounting', 'accel', 'latency', 'odometry', 'slip', 'odom_noise',
-              'turn_response', 'chessboard')
+# the options --benchmark takes; any other given with it is refused rather than ignored
+# (--robot has its own message)
+BENCHMARK_TAKES = ('benchmark', 'worlds', 'tracks', 'seeds', 'seed', 'start_offset',
+                   'start_yaw', 'jobs', 'json', 'force', 'robot', 'list_tracks')
 FLAGS = {'keep_going': '--continue'}  # where an option's name is not its flag's
+
+
+def flag(name):
+    """The command-line flag of the option `name` (argparse's dest)."""
+    return FLAGS.get(name, f"--{name.replace('_', '-')}")
 
 
 def benchmark_summary(results):
@@ -475,7 +479,8 @@ def write_chessboard(spec, args):
 
 
 def main(argv=None):
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
     check_outputs(args)
     if args.list_tracks:
         for name in BUILTIN:
@@ -492,13 +497,13 @@ def main(argv=None):
         if args.robot:  # its rows are the simulator's own settings, measured as such
             fail(PROG, '--robot drives one run; --benchmark runs every track with the '
                        "simulator's own settings for each world: leave one of them out")
-        defaults = build_parser().parse_args([])
-        ignored = [FLAGS.get(name, f"--{name.replace('_', '-')}") for name in SINGLE_RUN
-                   if getattr(args, name) != getattr(defaults, name)]
+        ignored = [flag(name) for name, value in vars(args).items()
+                   if name not in BENCHMARK_TAKES and value != parser.get_default(name)]
         if ignored:  # taken silently, they would not be what the table measured
+            takes = [flag(name) for name in BENCHMARK_TAKES
+                     if name not in ('benchmark', 'robot', 'list_tracks')]
             fail(PROG, f"{', '.join(ignored)}: for one run; --benchmark drives its own tracks, "
-                       'worlds and conditions (it takes --worlds, --tracks, --seeds, --seed, '
-                       '--start-offset, --start-yaw, --jobs, --json and --force)')
+                       f"worlds and conditions (it takes {', '.join(takes)})")
         if args.tracks:
             try:
                 for track in args.tracks:
