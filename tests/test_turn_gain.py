@@ -88,9 +88,10 @@ def test_a_base_that_turns_less_is_asked_for_more_only_with_turn_gain_measured()
 
     measured = run('measured', 0.6)
     assert made[-1].turning.gain == pytest.approx(0.6, abs=0.06)
+    assert made[-1].extra()['turn_gain'] == pytest.approx(0.6, abs=0.06)  # in the records
     assert max(abs(w) for w in sent) > 1.2  # asked for more than the preset's corners need
     assumed = run('assumed', 0.6)
-    assert made[-1].turning is None
+    assert made[-1].turning is None and made[-1].extra()['turn_gain'] is None
     assert measured['completed'] and assumed['completed']
     assert measured['rms_offset_m'] < assumed['rms_offset_m']
     run('measured', 1.0, time_limit=10.0)
