@@ -669,19 +669,17 @@ class ImprovedController:
     def extra(self):
         """The estimate, for the decision records."""
         e = self.estimate
-        # turn_gain 'measured': the share of the turn asked that the base turns, as measured
-        # (1 until odometry has shown enough turning); else None
-        turned = None if self.turning is None else round(self.turning.gain, 3)
+        # with or without a lane: turn_gain 'measured''s share of the turn asked that the base
+        # turns (1 until odometry has shown enough turning), else None
+        always = dict(cluttered=self.cluttered, pitch_error_deg=round(self.pitch_error, 2),
+                      turn_gain=None if self.turning is None else round(self.turning.gain, 3))
         if e is None:
             return dict(offset_m=None, heading_rad=None, curvature=None, confidence=0.0,
                         bend_m=None, bend_curvature=None, lane_width_m=None, lane_lost_s=None,
-                        cluttered=self.cluttered, pitch_error_deg=round(self.pitch_error, 2),
-                        turn_gain=turned)
+                        **always)
         width = None if e.width is None or self.lost_for > 0 else round(e.width, 4)
         bend = (None, None) if e.bend is None else (round(e.bend[0], 4), round(e.bend[1], 4))
         return dict(offset_m=round(e.offset, 4), heading_rad=round(e.heading, 4),
                     curvature=round(e.curvature, 4), confidence=round(e.confidence, 3),
                     bend_m=bend[0], bend_curvature=bend[1],
-                    lane_width_m=width, lane_lost_s=round(min(self.lost_for, 1e6), 3),
-                    cluttered=self.cluttered, pitch_error_deg=round(self.pitch_error, 2),
-                    turn_gain=turned)
+                    lane_width_m=width, lane_lost_s=round(min(self.lost_for, 1e6), 3), **always)
