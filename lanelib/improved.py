@@ -232,6 +232,10 @@ class ImprovedParams:
     memory: float = setting(4.0, "remember the centre line seen this long (moved with the "
                             "robot's motion: odometry, else the commands) and steer on it; "
                             '0: steer on the latest estimate only', 's', non_negative)
+    memory_points: int = setting(0, "with memory: keep at most this many of a frame's centre-line "
+                                 'points, evenly spread and carrying the weight of all (each '
+                                 "fit on the memory costs time in proportion); 0: every one",
+                                 'points', non_negative)
     memory_lookahead: float = setting(1.571, 'with memory: steer at the remembered centre line '
                                       'this far ahead', 'lane widths', positive)
     memory_window: float = setting(0.714, 'with memory: fit the points this far either side of '
@@ -370,7 +374,8 @@ class ImprovedController:
         self.sides = None  # each piece's side in the last frame's lane (pictures)
         self.held = False  # the last frame's lane was the one predicted (find_lane's prior)
         self.confirmed = 0  # frames since the estimate (re)started whose lane followed it
-        self.memory = LaneMemory(self.p.memory) if self.p.memory > 0 else None
+        self.memory = (LaneMemory(self.p.memory, self.p.memory_points) if self.p.memory > 0
+                       else None)
 
     @property
     def matrix(self):

@@ -30,10 +30,12 @@ ACROSS = math.cos(1.4)  # a line turned more than 1.4 rad (lanefit's HEADING_LIM
 
 
 class LaneMemory:
-    """Centre-line points (x, y, weight) of the last `seconds` of frames, in the start frame."""
+    """Centre-line points (x, y, weight) of the last `seconds` of frames, in the start frame;
+    with `most`, at most that many of each frame's points (add)."""
 
-    def __init__(self, seconds):
+    def __init__(self, seconds, most=0):
         self.seconds = seconds
+        self.most = most
         self.pose = np.zeros(3)  # x, y, yaw of the robot in the start frame
         self.t = 0.0
         self.clear()
@@ -65,7 +67,15 @@ class LaneMemory:
         return self._buffer[:, self.start:self.end]
 
     def add(self, x, y, w):
-        """Centre-line points seen now (robot frame)."""
+        """Centre-line points seen now (robot frame). With `most` and more points than that,
+        every k-th of them, the fewest k that leave at most `most`, weighed up so that they
+        carry the frame's whole weight: each fit the memory makes is a weighted sum over its
+        points, and its time grows with them (the Duckiebot's frame gives about 1,100)."""
+        if self.most and len(x) > self.most:
+            k = -(-len(x) // self.most)
+            total = w.sum()
+            x, y, w = x[::k], y[::k], w[::k]
+            w = w * (total / w.sum())
         px, py, yaw = self.pose
         cos, sin = math.cos(yaw), math.sin(yaw)
         chunk = (px + cos * x - sin * y, py + sin * x + cos * y, w)

@@ -623,6 +623,30 @@ def test_the_memory_keeps_the_points_of_its_last_seconds_however_its_buffer_grow
     assert all(np.array_equal(a, b) for a, b in handed)  # nothing handed out was overwritten
 
 
+def test_a_memory_told_most_keeps_that_many_of_a_frames_points_carrying_all_their_weight():
+    rng = np.random.default_rng(11)
+    x = np.sort(rng.uniform(0.1, 0.9, 1100))
+    y = 0.05 + 0.1 * x + 0.3 * x ** 2 + rng.normal(0, 0.004, x.size)  # a bend's centre line
+    w = rng.uniform(0.001, 0.003, x.size)
+    every, thinned = LaneMemory(10.0), LaneMemory(10.0, most=200)
+    for memory in (every, thinned):
+        memory.add(x, y, w)
+    kept = thinned.local()
+    assert kept[0].size == 184 and every.local()[0].size == 1100  # every 6th: 1100 / 6
+    assert np.array_equal(kept[0], x[::6]) and np.array_equal(kept[1], y[::6])
+    assert kept[2].sum() == pytest.approx(w.sum(), rel=1e-12)  # the frame's whole weight
+    # the fits the memory makes on the thinned points are those of all of them, within
+    # millimetres on this centre line: at the look-ahead and about the robot
+    for near, far in [(0.2, 0.54), (-0.14, 0.27)]:
+        a, b, c = every.centre_line(near, far, 0.1)
+        ta, tb, tc = thinned.centre_line(near, far, 0.1)
+        for at in (near, (near + far) / 2, far):
+            assert abs((ta + tb * at + tc * at * at) - (a + b * at + c * at * at)) < 0.002
+    few = LaneMemory(10.0, most=200)  # a frame with fewer points than that keeps all of them
+    few.add(x[:150], y[:150], w[:150])
+    assert np.array_equal(few.local()[2], w[:150])
+
+
 def test_the_memory_fits_the_centre_line_ahead_and_an_arc_round_a_u_turn():
     memory = LaneMemory(10.0)
     r = 0.5
