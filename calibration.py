@@ -19,6 +19,8 @@ usage:
     python calibration.py --ground board.png --pattern 7x5 --square 0.05 --board-ahead 0.8 \
         --calibration camera.yaml -o mounting.yaml
                                                   measure the mounting from a board on the floor
+    python calibration.py --homography robot.yaml --calibration duckiebot -o mounting.yaml
+                                                  a Duckiebot's extrinsic calibration as a mounting
 
 --pattern is the chessboard's inner corners (columns x rows), --square the side of one square
 in metres. --images finds the corners (sub-pixel), calibrates (plumb_bob), prints the RMS
@@ -36,6 +38,15 @@ intrinsics (lecture, duckiebot, or a camera_info YAML from --images; default lec
 prints and writes height [m], pitch_deg (down from horizontal), roll_deg, forward [m, lens
 ahead of the robot's centre] and the reprojection error, and refuses a board it cannot find or
 a fit that makes no sense (the camera below the floor, an error over 2 px).
+
+--homography: a Duckiebot calibrated by Duckietown's own tools keeps its mounting as a bare
+homography (its camera_extrinsic YAML, `homography: [9 numbers]`: pixels of the rectified image
+to the floor, in metres from the middle of the wheel axle). The tool reads the mounting out of
+it and writes the same YAML as --ground. --calibration gives the camera it was made with
+(default duckiebot, Duckietown's default; or the robot's camera_intrinsic YAML): Duckietown
+rectifies with its projection_matrix, and the homography is read with that. It prints how far
+apart the homography and the mounting put the floor in view, and refuses more than
+50 px (the homography read with another camera matrix than its own).
 """
 
 import argparse
@@ -46,11 +57,21 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from lanelib.camera import CalibrationError, Camera, camera_info_yaml, describe, load_calibration
+from lanelib.camera import (
+    CalibrationError,
+    Camera,
+    camera_info_yaml,
+    describe,
+    load_calibration,
+    rectified_matrix,
+)
 from lanelib.cli import check_output, check_outputs_apart
+from lanelib.files import read_yaml
 from lanelib.mounting import (
+    HOMOGRAPHY_ERROR_PX,
     MountingError,
     find_corners,
+    homography_mounting,
     mounting_yaml,
     parse_pattern,
     solve_mounting,
@@ -187,6 +208,39 @@ def run_ground(args):
           f'{args.output}')
 
 
+def run_homography(args):
+    check_written(args, [(args.homography, '--homography file'),
+                         (args.calibration, '--calibration file')])
+    doc = read_yaml(args.homography, CalibrationError, 'a Duckietown camera_extrinsic YAML')
+    if not isinstance(doc, dict) or 'homography' not in doc:
+        raise CalibrationError(f"{args.homography}: no field 'homography' (a Duckietown "
+                               'camera_extrinsic YAML: homography: [9 numbers])')
+    camera, matrix = rectified_matrix(args.calibration)
+    try:
+        result = homography_mounting(doc['homography'], matrix, camera.image_size)
+    except (MountingError, TypeError, ValueError) as e:
+        raise CalibrationError(f'{args.homography}: {e}') from None
+    if result.error_px > HOMOGRAPHY_ERROR_PX:
+        raise CalibrationError(
+            f'{args.homography}: no camera mounting on --calibration {args.calibration} gives '
+            f'this homography (they put the floor {result.error_px:.0f} px apart, more than '
+            f'{HOMOGRAPHY_ERROR_PX:g}): give the camera_intrinsic YAML it was made with')
+    m = result.mounting
+    print(f'camera {m.height:.4f} m above the floor, {m.forward:.4f} m ahead of the axle, '
+          f'pitched {m.pitch_deg:.2f} deg down, rolled {m.roll_deg:.2f} deg; the homography and '
+          f'this mounting put the floor in view {result.error_px:.1f} px apart (RMS)')
+    if abs(result.yaw_deg) > 2.0 or abs(result.lateral) > 0.02:
+        print(f'calibration.py: note: the homography also has the camera looking '
+              f'{abs(result.yaw_deg):.1f} deg {"left" if result.yaw_deg > 0 else "right"} of '
+              f'the robot\'s heading and {100 * abs(result.lateral):.1f} cm '
+              f'{"left" if result.lateral > 0 else "right"} of its centre line; the node '
+              'assumes neither', file=sys.stderr)
+    with open(args.output, 'w', encoding='utf-8') as f:
+        f.write(mounting_yaml(result, homography=args.homography))
+    print(f'wrote {args.output}: use it with kobuki_lane.py --controller improved --mounting '
+          f'{args.output}')
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -204,23 +258,30 @@ def main(argv=None):
     parser.add_argument('--board-ahead', type=positive_float, metavar='D',
                         help="with --ground: the nearest row of inner corners, this far ahead of "
                              "the robot's centre [m]")
-    parser.add_argument('--calibration', default='lecture',
-                        help="with --ground: the camera's intrinsics, 'lecture' (default), "
-                             "'duckiebot' or a camera_info YAML")
+    parser.add_argument('--homography', metavar='FILE',
+                        help="a Duckietown camera_extrinsic YAML to read the mounting from "
+                             '(see above)')
+    parser.add_argument('--calibration', default=None,
+                        help="with --ground or --homography: the camera's intrinsics, "
+                             "'lecture', 'duckiebot' or a camera_info YAML (default: lecture "
+                             'with --ground, duckiebot with --homography)')
     parser.add_argument('-o', '--output',
                         help='YAML to write (default: camera.yaml for --images, mounting.yaml '
-                             'for --ground)')
+                             'for --ground and --homography)')
     parser.add_argument('--name', default='camera', help="camera_name in the YAML")
     parser.add_argument('--force', action='store_true',
                         help='replace the -o file if it exists already (without it, an existing '
                              'file is refused before anything runs)')
     args = parser.parse_args(argv)
-    if args.images and args.ground:
-        parser.error('give --images or --ground, not both')
-    args.output = args.output or ('mounting.yaml' if args.ground else 'camera.yaml')
+    if sum(bool(x) for x in (args.images, args.ground, args.homography)) > 1:
+        parser.error('give one of --images, --ground and --homography')
+    args.output = args.output or ('camera.yaml' if args.images else 'mounting.yaml')
+    args.calibration = args.calibration or ('duckiebot' if args.homography else 'lecture')
     try:
         if args.ground:
             run_ground(args)
+        elif args.homography:
+            run_homography(args)
         elif args.images:
             run_calibration(args)
         else:

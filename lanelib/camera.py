@@ -65,6 +65,11 @@ DUCKIEBOT_CAMERA = Camera(
                          0.001308569367976665, 0.0]),
     image_size=(640, 480),
 )
+# the same file's projection_matrix (its first three columns): the camera matrix of the image
+# Duckietown rectifies with it, on which its extrinsic calibrations (homographies) are made
+DUCKIEBOT_PROJECTION = np.array([[210.1107940673828, 0.0, 327.2577820024981],
+                                 [0.0, 253.8408660888672, 239.9969353923052],
+                                 [0.0, 0.0, 1.0]])
 CAMERAS = {'lecture': LECTURE_CAMERA, 'duckiebot': DUCKIEBOT_CAMERA,
            # its frames rectified already (dt-core's image_rect, duckietown-lx's *_rect):
            # the same camera matrix, nothing left to undistort
@@ -92,6 +97,31 @@ def load_calibration(spec):
     if spec == 'none':
         return None
     return read_camera_info(spec)
+
+
+def rectified_matrix(spec):
+    """(camera, the camera matrix of the image a ROS or Duckietown pipeline rectifies it to)
+    for a --calibration: image_proc and dt-core rectify with the camera_info's
+    projection_matrix (its first three columns), which for a wide-angle camera keeps more of
+    the view than its camera_matrix. Duckietown's default has it; a camera_info YAML's own is
+    read (its camera_matrix if it has none); a built-in without one: its camera matrix."""
+    camera = load_calibration(spec)
+    if camera is None:
+        raise CalibrationError("a rectified image needs a camera: --calibration lecture, "
+                               "duckiebot or a camera_info YAML, not none")
+    if spec == 'duckiebot':
+        return camera, DUCKIEBOT_PROJECTION
+    if spec in CAMERAS:
+        return camera, camera.matrix
+    doc = read_yaml(spec, CalibrationError)
+    if 'projection_matrix' not in doc:
+        return camera, camera.matrix
+    projection = _matrix(doc, 'projection_matrix', 3, 4, spec)[:, :3]
+    if not np.all(np.isfinite(projection)) or projection[0, 0] <= 0 or \
+            projection[1, 1] <= 0 or not np.allclose(projection[2], [0.0, 0.0, 1.0]):
+        raise CalibrationError(f"{spec}: field 'projection_matrix' is not a camera's "
+                               '([fx, 0, cx, 0, 0, fy, cy, 0, 0, 0, 1, 0])')
+    return camera, projection
 
 
 DISTORTION_LENGTHS = (4, 5, 8, 12, 14)  # what OpenCV's plumb_bob and rational models take

@@ -33,6 +33,11 @@ KEYS = ('height', 'pitch_deg', 'roll_deg', 'forward')
 BOUNDS = dict(height=above(0, 2), pitch_deg=between(-45, 80), roll_deg=between(-45, 45),
               forward=between(-2, 2))
 MAX_ERROR_PX = 2.0  # a fit worse than this is refused: the board or its settings are wrong
+# a Duckietown homography whose mounting puts the floor further than this from it was made with
+# another camera: dt-core's log-calib-config holds 42 robots' extrinsic calibrations; the 41
+# with the camera above the floor, each read with its robot's projection matrix (the default's
+# where it has none), leave 1.6 to 40 px; read with the camera matrix, 71 to 180
+HOMOGRAPHY_ERROR_PX = 50.0
 
 
 class MountingError(ValueError):
@@ -138,7 +143,14 @@ def solve_mounting(image, camera, pattern, square, board_ahead):
     projected, _ = cv2.projectPoints(object_points, rvec, tvec, cam.matrix, cam.distortion)
     error = float(np.sqrt(np.mean(np.sum((projected - image_points) ** 2, axis=2))))
     rotation, _ = cv2.Rodrigues(rvec)  # robot -> camera: its rows are the camera's axes
-    lens = -rotation.T @ tvec.ravel()
+    result = pose_mounting(rotation, -rotation.T @ tvec.ravel(), error, grid.reshape(-1, 2))
+    check(result, board_ahead)
+    return result
+
+
+def pose_mounting(rotation, lens, error_px, corners):
+    """The MountingResult of a camera pose: `rotation` takes the robot frame to the camera's
+    (its rows are the camera's axes in the robot frame), `lens` is where the lens is."""
     x_cam, _, z_cam = rotation
     pitch = math.degrees(math.asin(float(np.clip(-z_cam[2], -1.0, 1.0))))
     yaw = math.degrees(math.atan2(z_cam[1], z_cam[0]))
@@ -147,9 +159,54 @@ def solve_mounting(image, camera, pattern, square, board_ahead):
     level /= max(np.linalg.norm(level), 1e-12)
     down = np.cross(z_cam, level)
     roll = math.degrees(math.atan2(float(x_cam @ down), float(x_cam @ level)))
-    result = MountingResult(Mounting(float(lens[2]), pitch, float(lens[0]), roll), error, yaw,
-                            float(lens[1]), grid.reshape(-1, 2))
-    check(result, board_ahead)
+    return MountingResult(Mounting(float(lens[2]), pitch, float(lens[0]), roll), error_px, yaw,
+                          float(lens[1]), corners)
+
+
+def homography_mounting(homography, matrix, size):
+    """The mounting a Duckietown extrinsic calibration holds. Duckietown keeps it as a bare
+    homography (its camera_extrinsic YAML): pixels of the rectified image, whose camera matrix
+    is `matrix` (Duckietown rectifies with the camera_info's projection matrix, not its camera
+    matrix), to floor points (x ahead, y left, metres, from the middle of the wheel axle). Its
+    inverse is matrix @ [r1 r2 t] up to scale, r1 and r2 the floor's x and y axes seen from the
+    camera and t the axle's middle: the nearest rotation to them gives the mounting.
+    error_px: how far the floor's pixels with that mounting lie from the homography's, over
+    the floor in view of a `size` (width, height) picture up to 1 m ahead; large when the
+    homography was made with another camera matrix. MountingError for a matrix that is no
+    homography of a floor below a camera."""
+    h = np.asarray(homography, float)
+    if h.size != 9 or not np.all(np.isfinite(h)):
+        raise MountingError('a homography is 9 finite numbers (3x3, row by row)')
+    h = h.reshape(3, 3)
+    if abs(np.linalg.det(h)) < 1e-15:
+        raise MountingError('the homography is singular: it maps no picture to a floor')
+    m = np.linalg.inv(matrix) @ np.linalg.inv(h)  # floor (x, y, 1) -> camera rays
+    m *= 2.0 / (np.linalg.norm(m[:, 0]) + np.linalg.norm(m[:, 1]))
+    if (m[:, 0] + m[:, 2])[2] < 0:  # the floor 1 m ahead lies in front of the camera
+        m = -m
+    u, _, vt = np.linalg.svd(np.column_stack([m[:, 0], m[:, 1], np.cross(m[:, 0], m[:, 1])]))
+    rotation = u @ vt  # robot -> camera
+    if np.linalg.det(rotation) < 0:
+        raise MountingError('the homography mirrors the floor: no camera sees it so')
+    shift = m[:, 2]  # the axle's middle in the camera's frame
+    # the pixels of the floor in view (up to 1 m ahead), mapped by the homography and by
+    # the mounting
+    width, height = size
+    uu, vv = np.meshgrid(np.linspace(0, width - 1, 17), np.linspace(0, height - 1, 13))
+    pixels = np.stack([uu.ravel(), vv.ravel(), np.ones(uu.size)])
+    floor = h @ pixels
+    ahead = floor[0] / floor[2]
+    seen = (floor[2] * np.sign(floor[2]).mean() > 0) & (ahead > 0) & (ahead < 1.0)
+    if seen.sum() < 4:
+        raise MountingError('the homography puts none of the picture on the floor ahead')
+    points = np.vstack([floor[:2, seen] / floor[2, seen], np.zeros(seen.sum())])
+    rays = matrix @ (rotation @ points + shift[:, None])
+    error = float(np.sqrt(np.mean(np.sum((rays[:2] / rays[2] - pixels[:2, seen]) ** 2,
+                                         axis=0))))
+    result = pose_mounting(rotation, -rotation.T @ shift, error, pixels[:2, seen].T)
+    if result.mounting.height <= 0:
+        raise MountingError(f'the homography puts the camera {-100 * result.mounting.height:.1f}'
+                            ' cm below the floor')
     return result
 
 
@@ -192,14 +249,21 @@ def warnings(result):
     return said
 
 
-def mounting_yaml(result):
+def mounting_yaml(result, homography=None):
+    """The YAML --mounting reads: from a board's picture (its reprojection error a field), or
+    from the Duckietown homography file `homography` (how far apart the two put the floor
+    said in a comment)."""
     m = result.mounting
-    return (f'# the camera on the robot, from calibration.py --ground\n'
+    made_by = f'calibration.py --homography {homography}' if homography else \
+        'calibration.py --ground'
+    error = (f'# this mounting and the homography put the floor in view (up to 1 m ahead) '
+             f'{result.error_px:.1f} px apart, RMS\n' if homography else
+             f'reprojection_error_px: {result.error_px:.3f}\n')
+    return (f'# the camera on the robot, from {made_by}\n'
             f'height: {m.height:.4f}  # [m] lens above the floor\n'
             f'pitch_deg: {m.pitch_deg:.3f}  # [deg] optical axis below horizontal\n'
             f'roll_deg: {m.roll_deg:.3f}  # [deg] about the optical axis, + right side lower\n'
-            f'forward: {m.forward:.4f}  # [m] lens ahead of the robot centre\n'
-            f'reprojection_error_px: {result.error_px:.3f}\n')
+            f'forward: {m.forward:.4f}  # [m] lens ahead of the robot centre\n' + error)
 
 
 def read_mounting(path):

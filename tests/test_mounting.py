@@ -13,7 +13,7 @@ from helpers import NODE, REPO, SAMPLES, read_jsonl
 import simulate
 from calibration import main as calibration_main
 from kobuki_lane import main as node_main
-from lanelib.camera import DUCKIEBOT_CAMERA, LECTURE_CAMERA
+from lanelib.camera import DUCKIEBOT_CAMERA, DUCKIEBOT_PROJECTION, LECTURE_CAMERA, camera_info_yaml
 from lanelib.geometry import (
     Mounting,
     floor_to_pixels,
@@ -22,7 +22,13 @@ from lanelib.geometry import (
     rays_to_floor,
     repitched,
 )
-from lanelib.mounting import MountingError, read_mounting, solve_mounting
+from lanelib.mounting import (
+    HOMOGRAPHY_ERROR_PX,
+    MountingError,
+    homography_mounting,
+    read_mounting,
+    solve_mounting,
+)
 from lanelib.sim.world import chessboard_view
 
 # (camera, true mounting, board pattern, square [m], nearest corners ahead [m])
@@ -212,3 +218,96 @@ def test_a_bad_mounting_file_names_the_field(tmp_path, text, field):
     proc = cli(NODE, '--source', SAMPLES, '--dry-run', '--controller', 'improved', '--mounting',
                str(path))
     assert proc.returncode == 2 and field in proc.stderr and 'Traceback' not in proc.stderr
+
+
+def floor_homography(matrix, mounting):
+    """Duckietown's extrinsic calibration of a camera at `mounting`, built independently of the
+    tool: the rectified image's pixels (camera matrix `matrix`) of a floor grid, and the
+    homography OpenCV fits from them to the floor."""
+    x, y = np.meshgrid(np.linspace(0.15, 0.6, 6), np.linspace(-0.2, 0.2, 5))
+    u, v, ok = floor_to_pixels(x.ravel(), y.ravel(), matrix, mounting)
+    assert ok.all()
+    h, _ = cv2.findHomography(np.stack([u, v], axis=1), np.stack([x.ravel(), y.ravel()], axis=1))
+    return h / h[2, 2]
+
+
+@pytest.mark.parametrize('true', [Mounting(0.108, 19.15, 0.066), Mounting(0.12, 25.0, 0.04, 3.0),
+                                  Mounting(0.20, 4.0, 0.10, -1.5)])
+def test_a_duckietown_homography_gives_back_its_mounting(true):
+    h = floor_homography(DUCKIEBOT_PROJECTION, true)
+    result = homography_mounting(h.ravel().tolist(), DUCKIEBOT_PROJECTION, (640, 480))
+    m = result.mounting
+    assert m.height == pytest.approx(true.height, abs=1e-6)
+    assert m.pitch_deg == pytest.approx(true.pitch_deg, abs=1e-4)
+    assert m.roll_deg == pytest.approx(true.roll_deg, abs=1e-4)
+    assert m.forward == pytest.approx(true.forward, abs=1e-6)
+    assert abs(result.yaw_deg) < 1e-4 and abs(result.lateral) < 1e-6
+    assert result.error_px < 1e-3
+
+
+def test_a_homography_read_with_another_camera_matrix_is_refused(tmp_path):
+    # made on the image rectified with the projection matrix (as dt-core does), read with the
+    # camera matrix: no camera mounting gives it
+    h = floor_homography(DUCKIEBOT_PROJECTION, Mounting(0.108, 21.0, 0.066))
+    assert homography_mounting(h, DUCKIEBOT_CAMERA.matrix, (640, 480)).error_px > \
+        HOMOGRAPHY_ERROR_PX
+    made = tmp_path / 'robot.yaml'
+    made.write_text(f'homography: {h.ravel().tolist()}\n')
+    intrinsics = tmp_path / 'camera.yaml'  # its projection is its camera matrix
+    intrinsics.write_text(camera_info_yaml(DUCKIEBOT_CAMERA))
+    out = tmp_path / 'mounting.yaml'
+    assert calibration_main(['--homography', str(made), '--calibration', str(intrinsics),
+                             '-o', str(out)]) == 2
+    assert not out.exists()
+    assert calibration_main(['--homography', str(made), '-o', str(out)]) == 0
+    assert read_mounting(str(out)).pitch_deg == pytest.approx(21.0, abs=1e-3)
+    # the robot's own camera_intrinsic YAML: its projection_matrix is the one read
+    projection = np.hstack([DUCKIEBOT_PROJECTION, np.zeros((3, 1))]).ravel().tolist()
+    intrinsics.write_text(camera_info_yaml(DUCKIEBOT_CAMERA).split('projection_matrix')[0] +
+                          f'projection_matrix:\n  rows: 3\n  cols: 4\n  data: {projection}\n')
+    assert calibration_main(['--homography', str(made), '--calibration', str(intrinsics),
+                             '-o', str(out), '--force']) == 0
+    assert read_mounting(str(out)).pitch_deg == pytest.approx(21.0, abs=1e-3)
+
+
+def test_the_tool_reads_duckietowns_default_homography(tmp_path, capsys):
+    # duckiefleet's calibrations/camera_extrinsic/default.yaml, read with the default
+    # intrinsics' projection matrix; its horizon lies at row 119.5 of the 480 (in the
+    # image's middle column), 25.4 degrees above that matrix's centre row 240.0
+    made = tmp_path / 'default.yaml'
+    made.write_text('homography: [-4.89775e-05, -0.0002150858, -0.1818273, 0.00099274, '
+                    '1.202336e-06, -0.3280241, -0.0004281805, -0.007185673, 1]\n')
+    out = tmp_path / 'mounting.yaml'
+    assert calibration_main(['--homography', str(made), '-o', str(out)]) == 0
+    m = read_mounting(str(out))
+    assert m.pitch_deg == pytest.approx(25.3, abs=0.15)
+    assert 0.09 < m.height < 0.12 and 0.05 < m.forward < 0.1
+    said = capsys.readouterr()
+    assert 'px apart' in said.out and 'looking 2.1 deg left' in said.err
+
+
+def test_the_visual_control_mounting_is_its_homography_read_by_the_tool(tmp_path):
+    # tools/robots/visual_control_mounting.yaml (tools.evaluate_real's) is what the tool makes
+    # of the published homography beside it, and the node reads it
+    robots = os.path.join(REPO, 'tools', 'robots')
+    out = tmp_path / 'mounting.yaml'
+    made = os.path.join(robots, 'visual_control_homography.yaml')
+    assert calibration_main(['--homography', made, '-o', str(out)]) == 0
+    kept = read_mounting(os.path.join(robots, 'visual_control_mounting.yaml'))
+    assert read_mounting(str(out)) == kept
+
+
+@pytest.mark.parametrize('text, says', [
+    ('homography: [1, 2, 3]\n', '9 finite numbers'),
+    ('homography: [1, 0, 0, 0, 1, 0, 0, 0, 0]\n', 'singular'),
+    ('camera_matrix: {}\n', "no field 'homography'"),
+    # a robot's in dt-core's log-calib-config (cookie.yaml): the floor seen from below
+    ('homography: [3.141844e-05, -0.003669246, 0.6774592, -0.0009989715, -1.831895e-05, '
+     '0.3409429, 6.832473e-05, -0.007933678, 1]\n', 'below the floor'),
+])
+def test_a_homography_file_the_tool_cannot_use_is_refused(tmp_path, capsys, text, says):
+    made = tmp_path / 'robot.yaml'
+    made.write_text(text)
+    out = tmp_path / 'mounting.yaml'
+    assert calibration_main(['--homography', str(made), '-o', str(out)]) == 2
+    assert says in capsys.readouterr().err and not out.exists()
