@@ -10,6 +10,7 @@ from kobuki_lane import LaneParams
 from lanelib.camera import DUCKIEBOT_CAMERA
 from lanelib.geometry import Mounting
 from lanelib.improved import ImprovedParams
+from lanelib.mounting import read_mounting
 from lanelib.robots import load_robot
 from lanelib.safety import Safety
 from lanelib.sim.world import WORLDS, ColourFloorMap, FloorCamera, Scene, Track
@@ -94,3 +95,21 @@ def test_a_folder_without_labels_is_an_error(tmp_path):
     with pytest.raises(SystemExit) as e:
         evaluate_real.main([str(tmp_path)])
     assert e.value.code == 2
+
+
+def test_pictures_published_with_their_calibration_are_decided_with_it():
+    """duckietown-lx's visual_control pictures get the mounting made from the homography
+    published with them (tools/robots/visual_control_mounting.yaml), as their robot's user
+    would give it; the source's other pictures, and every other source, the preset's."""
+    def mounting(relpath):
+        flags = evaluate_real.flags_for(relpath, evaluate_real.PRESETS)
+        return flags[flags.index('--mounting') + 1] if '--mounting' in flags else None
+    given = mounting('duckietown_duckietown-lx/visual_control_pic11.png')
+    assert given.endswith('tools/robots/visual_control_mounting.yaml')
+    assert read_mounting(given).pitch_deg < PRESET['camera_pitch'] - 5  # not the preset's
+    rectified = evaluate_real.flags_for('duckietown_duckietown-lx/visual_control_pic1_rect.png',
+                                        evaluate_real.PRESETS)
+    assert rectified[-4:] == ['--calibration', 'duckiebot-rectified', '--mounting', given]
+    for other in ('duckietown_duckietown-lx/state-estimation_pic1.png',
+                  'duckietown_dt-core_anti_instagram/316closed_0031.jpg'):
+        assert mounting(other) is None

@@ -31,6 +31,10 @@ folder, and its name's start is enough):
                               no calibration published, so what a user would assume (a 60 degree
                               field of view, level, 1.2 m up); nothing is estimated from the
                               frames scored
+A picture published with its robot's own calibration gets it as that robot's user would:
+duckietown-lx's visual_control_* pictures, --mounting tools/robots/visual_control_mounting.yaml
+(the homography its visual-lane-servoing exercise gives for them, read by calibration.py
+--homography: 15.0 degrees down, 0.128 m up, where Duckietown's default is 21.6 and 0.108).
 
 usage (from the repository root):
     python -m tools.evaluate_real ../shared/real-frames [--json out.json] [--details]
@@ -56,6 +60,10 @@ from tools.common import REPO, write_json
 PROG = 'tools.evaluate_real'
 PRESETS = {'duckietown': 'duckiebot', 'negatives': 'duckiebot',
            'udacity': os.path.join(REPO, 'tools', 'robots', 'dashcam.yaml')}
+# pictures published with their robot's calibration: its mounting (made from it by
+# calibration.py --homography), as that robot's user gives it
+MOUNTINGS = {'duckietown_duckietown-lx/visual_control_':
+             os.path.join(REPO, 'tools', 'robots', 'visual_control_mounting.yaml')}
 COLUMNS = ('file', 'expected_steering', 'confidence', 'scene')
 STEERING = ('left', 'right', 'straight', 'no_lane')
 DOUBTFUL = {  # label: why it is judged doubtful, from the picture
@@ -91,6 +99,9 @@ def flags_for(relpath, presets):
     flags = ['--controller', 'improved', '--robot', preset_for(source_of(relpath), presets)]
     if '_rect' in os.path.basename(relpath):
         flags += ['--calibration', 'duckiebot-rectified']
+    for start, mounting in MOUNTINGS.items():
+        if relpath.startswith(start):
+            flags += ['--mounting', mounting]
     return flags
 
 
