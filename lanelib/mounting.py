@@ -185,9 +185,7 @@ def homography_mounting(homography, matrix, size):
     if (m[:, 0] + m[:, 2])[2] < 0:  # the floor 1 m ahead lies in front of the camera
         m = -m
     u, _, vt = np.linalg.svd(np.column_stack([m[:, 0], m[:, 1], np.cross(m[:, 0], m[:, 1])]))
-    rotation = u @ vt  # robot -> camera
-    if np.linalg.det(rotation) < 0:
-        raise MountingError('the homography mirrors the floor: no camera sees it so')
+    rotation = u @ vt  # robot -> camera (the third column makes it a rotation, not a mirror)
     shift = m[:, 2]  # the axle's middle in the camera's frame
     # the pixels of the floor in view (up to 1 m ahead), mapped by the homography and by
     # the mounting
@@ -196,7 +194,7 @@ def homography_mounting(homography, matrix, size):
     pixels = np.stack([uu.ravel(), vv.ravel(), np.ones(uu.size)])
     floor = h @ pixels
     ahead = floor[0] / floor[2]
-    seen = (floor[2] * np.sign(floor[2]).mean() > 0) & (ahead > 0) & (ahead < 1.0)
+    seen = (ahead > 0) & (ahead < 1.0)  # (the sky maps behind the robot)
     if seen.sum() < 4:
         raise MountingError('the homography puts none of the picture on the floor ahead')
     points = np.vstack([floor[:2, seen] / floor[2, seen], np.zeros(seen.sum())])
