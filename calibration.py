@@ -41,7 +41,8 @@ a fit that makes no sense (the camera below the floor, an error over 2 px).
 
 --homography: a Duckiebot calibrated by Duckietown's own tools keeps its mounting as a bare
 homography (its camera_extrinsic YAML, `homography: [9 numbers]`: pixels of the rectified image
-to the floor, in metres from the middle of the wheel axle). The tool reads the mounting out of
+to the floor, in metres from the middle of the wheel axle; with `version: '2'`, the newer
+layout, the image's coordinates run from 0 to 1 across it). The tool reads the mounting out of
 it and writes the same YAML as --ground. --calibration gives the camera it was made with
 (default duckiebot, Duckietown's default; or the robot's camera_intrinsic YAML): Duckietown
 rectifies with its projection_matrix, and the homography is read with that. It prints how far
@@ -217,7 +218,14 @@ def run_homography(args):
                                'camera_extrinsic YAML: homography: [9 numbers])')
     camera, matrix = rectified_matrix(args.calibration)
     try:
-        result = homography_mounting(doc['homography'], matrix, camera.image_size)
+        homography = np.asarray(doc['homography'], float)
+        if str(doc.get('version', '1')).strip() == '2':
+            # Duckietown's newer layout: the rectified image's corners at 0 and 1 (its
+            # resolution-independent coordinates), so pixels are first divided by the size
+            width, height = camera.image_size
+            homography = homography.reshape(3, 3) @ np.diag([1 / (width - 1), 1 / (height - 1),
+                                                             1.0])
+        result = homography_mounting(homography, matrix, camera.image_size)
     except (MountingError, TypeError, ValueError) as e:
         raise CalibrationError(f'{args.homography}: {e}') from None
     if result.error_px > HOMOGRAPHY_ERROR_PX:

@@ -245,6 +245,22 @@ def test_a_duckietown_homography_gives_back_its_mounting(true):
     assert result.error_px < 1e-3
 
 
+def test_the_newer_layout_in_image_coordinates_from_0_to_1_is_read_too(tmp_path):
+    # Duckietown's version 2 files (dt_computer_vision's HomographyToolkit): the same
+    # homography on coordinates divided by the image's size less one
+    true = Mounting(0.11, 22.0, 0.07, 1.0)
+    h = floor_homography(DUCKIEBOT_PROJECTION, true) @ np.diag([639.0, 479.0, 1.0])
+    made = tmp_path / 'robot.yaml'
+    made.write_text(f"version: '2'\nhomography: {(h / h[2, 2]).tolist()}\n")
+    out = tmp_path / 'mounting.yaml'
+    assert calibration_main(['--homography', str(made), '-o', str(out)]) == 0
+    m = read_mounting(str(out))
+    assert (m.height, m.forward) == pytest.approx((true.height, true.forward), abs=1e-4)
+    assert (m.pitch_deg, m.roll_deg) == pytest.approx((true.pitch_deg, true.roll_deg), abs=1e-2)
+    made.write_text(f'homography: {(h / h[2, 2]).tolist()}\n')  # read as pixels: refused
+    assert calibration_main(['--homography', str(made), '-o', str(out), '--force']) == 2
+
+
 def test_a_homography_read_with_another_camera_matrix_is_refused(tmp_path):
     # made on the image rectified with the projection matrix (as dt-core does), read with the
     # camera matrix: no camera mounting gives it
