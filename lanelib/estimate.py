@@ -3,8 +3,7 @@
     measure   one frame: among all the pieces of line in view, the robot's own lane
               (lanelib/lanefit.py: the lane whose two lines the pieces best support, with the
               colours allowed on each side), as an arc through the robot; None when too
-              little of its lines is seen within the look-ahead (near_seen), or the robot would
-              be more than half a lane outside it
+              little of it is seen, or the robot would be more than half a lane outside it
     predict   the last estimate moved with the robot's motion since (and a little less sure)
     follows   whether a measurement can be the lane predicted: its heading at the robot, and
               where it lies across, within gates of the prediction's (ImprovedParams.turn_gate,
@@ -26,10 +25,7 @@ import numpy as np
 
 from lanelib.lanefit import LaneFit, centre_path, find_lane, robot_offset
 
-MIN_SEEN = 0.25  # [lane widths] of the lane's lines within the look-ahead: less is no lane (a
-# scrap, a glint; far up the view a few pixels span a long stretch of floor, so line seen only
-# beyond where the robot steers is no lane: Duckietown's lane filter votes with segments 0.2 to
-# 0.6 m ahead, its range_min and range_max)
+MIN_SEEN = 0.25  # [lane widths] of the lane's lines: less is no lane (a scrap, a glint)
 FULL_VIEW = 2.9  # [lane widths] of line seen counts as a full view (confidence 1)
 ONE_LINE = 0.7  # how sure one line alone makes the estimate, against both
 FORGET = 0.8  # how much of its confidence a prediction keeps, per frame
@@ -104,8 +100,7 @@ def measure(pieces, profile, p, prior=None, anchor=None, prior_first=False, widt
     fit = find_lane(pieces, profile, p.lane_width, prior, width_tolerance=p.width_tolerance,
                     anchor=anchor, prior_first=prior_first, width=width,
                     spread_limit=spread_limit, expected=expected)
-    if (fit is None or near_seen(pieces, fit.sides, p.lookahead) < MIN_SEEN * p.lane_width
-            or abs(fit.across) > fit.width):
+    if fit is None or fit.left + fit.right < MIN_SEEN * p.lane_width or abs(fit.across) > fit.width:
         return None, fit
     b = math.tan(fit.psi)
     confidence = (min(1.0, (fit.left + fit.right) / (FULL_VIEW * p.lane_width)) *
@@ -115,13 +110,6 @@ def measure(pieces, profile, p, prior=None, anchor=None, prior_first=False, widt
                         int(np.sum(fit.sides == 1)), int(np.sum(fit.sides == -1)),
                         float(np.average(cx, weights=cw)), fit.centre, fit.width, fit.bend,
                         fit.spread), fit
-
-
-def near_seen(pieces, sides, distance):
-    """[m] of the lane's lines (the pieces with a side) within `distance` ahead, counted by
-    their summary points."""
-    return sum(float(w[x <= distance].sum()) for (x, _, w), side in
-               zip((piece.summary for piece in pieces), sides) if side)
 
 
 def predict(est, ds, dtheta):

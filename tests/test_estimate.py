@@ -12,7 +12,7 @@ import pytest
 from kobuki_lane import LaneParams
 from lanelib import lanefit
 from lanelib.colour import Piece
-from lanelib.estimate import MIN_SEEN, LaneEstimate, blend, measure, near_seen, predict
+from lanelib.estimate import LaneEstimate, blend, measure, predict
 from lanelib.improved import ANCHOR, CONFIRMED, REGAINED, ImprovedController, ImprovedParams
 from lanelib.lanefit import bent_distance, centre_path, robot_offset, signed_distance
 from lanelib.lanes import BUILTIN
@@ -69,18 +69,6 @@ def test_no_line_or_a_scrap_is_no_lane():
     assert measure([], DT, P) == (None, None)
     scrap = line_pieces(0.05, 'white', along=(0.5, 0.52), step=0.03)
     assert measure(scrap, DT, P)[0] is None  # 3 cm: less than a quarter lane width
-
-
-def test_line_seen_only_beyond_the_look_ahead_is_no_lane():
-    """A glint or a wall's foot far up the view spans a long stretch of floor in few pixels:
-    the lane's lines must be seen within the look-ahead, where the robot steers."""
-    beyond = line_pieces(-0.08, 'white', along=(P.lookahead + 0.01, P.lookahead + 0.31))
-    assert sum(piece.length for piece in beyond) > 4 * MIN_SEEN * DT.lane_width
-    assert measure(beyond, DT, P)[0] is None
-    within = line_pieces(-0.08, 'white', along=(P.lookahead - 0.3, P.lookahead))
-    assert measure(within, DT, P)[0] is not None
-    both = line_pieces(-0.08, 'white', along=(P.lookahead - 0.1, P.lookahead + 0.3))
-    assert near_seen(both, [-1] * len(both), P.lookahead) == pytest.approx(0.1, abs=0.01)
 
 
 def test_a_lane_the_robot_would_be_far_outside_is_not_its_own():
