@@ -3,7 +3,9 @@
     measure   one frame: among all the pieces of line in view, the robot's own lane
               (lanelib/lanefit.py: the lane whose two lines the pieces best support, with the
               colours allowed on each side), as an arc through the robot; None when too
-              little of it is seen, or the robot would be more than half a lane outside it
+              little of its lines is seen (only those near enough, to start a lane:
+              ImprovedParams.seen_within), or the robot would be more than half a lane
+              outside it
     predict   the last estimate moved with the robot's motion since (and a little less sure)
     follows   whether a measurement can be the lane predicted: its heading at the robot, and
               where it lies across, within gates of the prediction's (ImprovedParams.turn_gate,
@@ -83,7 +85,7 @@ def half_curvature(k, b):
 
 
 def measure(pieces, profile, p, prior=None, anchor=None, prior_first=False, width=None,
-            expected=None, splay=True):
+            expected=None, splay=True, within=0.0):
     """One frame's LaneEstimate from pieces of line with their colours, or None (module doc);
     and the lanefit.LaneFit it rests on (or None). p: ImprovedParams in metres; prior: the
     arc (e, psi, k) of the lane expected; anchor: (offset, heading) of the lane expected at
@@ -92,7 +94,8 @@ def measure(pieces, profile, p, prior=None, anchor=None, prior_first=False, widt
     measured with both in view: one line alone lies half of it from the lane's centre
     (default: the profile's). With p.pitch_tolerance the lines may splay (lanefit._halves),
     unless `splay` is False: the pitch is read otherwise (from the floor's motion), and lines
-    parallel on the floor are drawn parallel."""
+    parallel on the floor are drawn parallel. within [m]: only the lines this near count
+    towards MIN_SEEN (0: all of them)."""
     # a pitch off by d stretches the floor drawn by about 1 + tan(d) x / h at x ahead (h the
     # camera's height): the width between the lines changes by lane_width tan(d) / h a metre
     spread_limit = (p.lane_width * math.tan(math.radians(p.pitch_tolerance)) / p.camera_height
@@ -100,7 +103,10 @@ def measure(pieces, profile, p, prior=None, anchor=None, prior_first=False, widt
     fit = find_lane(pieces, profile, p.lane_width, prior, width_tolerance=p.width_tolerance,
                     anchor=anchor, prior_first=prior_first, width=width,
                     spread_limit=spread_limit, expected=expected)
-    if fit is None or fit.left + fit.right < MIN_SEEN * p.lane_width or abs(fit.across) > fit.width:
+    if fit is None or abs(fit.across) > fit.width:
+        return None, fit
+    seen = near_seen(pieces, fit.sides, within) if within else fit.left + fit.right
+    if seen < MIN_SEEN * p.lane_width:
         return None, fit
     b = math.tan(fit.psi)
     confidence = (min(1.0, (fit.left + fit.right) / (FULL_VIEW * p.lane_width)) *
@@ -110,6 +116,16 @@ def measure(pieces, profile, p, prior=None, anchor=None, prior_first=False, widt
                         int(np.sum(fit.sides == 1)), int(np.sum(fit.sides == -1)),
                         float(np.average(cx, weights=cw)), fit.centre, fit.width, fit.bend,
                         fit.spread), fit
+
+
+def near_seen(pieces, sides, distance):
+    """[m] of the lane's lines (the pieces given a side) within `distance` [m] ahead, counted
+    by their summary points."""
+    on = [piece.summary for piece, side in zip(pieces, sides) if side]
+    if not on:
+        return 0.0
+    x = np.concatenate([points[0] for points in on])  # one array: a sum per piece cost 5 times
+    return float(np.concatenate([points[2] for points in on])[x <= distance].sum())
 
 
 def predict(est, ds, dtheta):

@@ -163,6 +163,13 @@ class ImprovedParams:
     roi_near: float = setting(0.857, 'floor mask starts this far ahead (clipped to the view)',
                               'lane widths', positive)
     roi_far: float = setting(3.43, 'floor mask ends this far ahead', 'lane widths', positive)
+    seen_within: float = setting(0.0, "a lane is started (none confirmed to follow) only by "
+                                 "its lines within this far ahead (at least MIN_SEEN lane "
+                                 'widths of them, lanelib/estimate.py): far up the view a few '
+                                 "pixels span a long stretch of floor, where a glint or a wall's "
+                                 'foot can pass for a line; a lane followed is seen by all its '
+                                 'lines; 0: the whole floor band always', 'lane widths',
+                                 non_negative)
     max_pieces: int = setting(60, 'at most this many pieces of line used per frame (the '
                               'longest); bounds the work on cluttered frames, which are marked '
                               "'cluttered' in the decision records", '', positive)
@@ -255,7 +262,8 @@ class ImprovedParams:
     # the settings given in lane widths (and lane widths per second): the Kobuki's numbers
     # divided by the lecture's 0.35 m lane, so that a narrower lane scales them all
     LANE_WIDTHS = ('roi_near', 'roi_far', 'v_max', 'v_min', 'curve_slowdown', 'lookahead',
-                   'lookahead_min', 'memory_lookahead', 'memory_window', 'shift_gate')
+                   'lookahead_min', 'memory_lookahead', 'memory_window', 'shift_gate',
+                   'seen_within')
 
     def in_metres(self, lane_width):
         """The same settings with those in lane widths in metres and m/s, for a lane
@@ -480,9 +488,12 @@ class ImprovedController:
         # on the floor: a splay allowed too took part of a corner ahead for one (the project's
         # simulator, inner loop: docs/benchmarks.md, forty-third session)
         from_motion = self.floor_pitch is not None and moved is not None
+        # a lane started (none confirmed to follow) needs its lines near: far up the view a
+        # glint or a wall's foot passes for a line; one followed is seen by all its lines
+        started = not (current and self.confirmed >= CONFIRMED)
         meas, fit = measure(pieces, self.profile, p, guide, anchor, self.held,
                             self.width if p.one_line_width == 'measured' else None, expected,
-                            splay=not from_motion)
+                            splay=not from_motion, within=p.seen_within if started else 0.0)
         self.mark('lane')
         if meas is not None and current and not follows(prior, meas, p.turn_gate, p.shift_gate):
             if self.confirmed >= CONFIRMED:

@@ -12,7 +12,7 @@ import pytest
 from kobuki_lane import LaneParams
 from lanelib import lanefit
 from lanelib.colour import Piece
-from lanelib.estimate import LaneEstimate, blend, measure, predict
+from lanelib.estimate import MIN_SEEN, LaneEstimate, blend, measure, near_seen, predict
 from lanelib.improved import ANCHOR, CONFIRMED, REGAINED, ImprovedController, ImprovedParams
 from lanelib.lanefit import bent_distance, centre_path, robot_offset, signed_distance
 from lanelib.lanes import BUILTIN
@@ -69,6 +69,44 @@ def test_no_line_or_a_scrap_is_no_lane():
     assert measure([], DT, P) == (None, None)
     scrap = line_pieces(0.05, 'white', along=(0.5, 0.52), step=0.03)
     assert measure(scrap, DT, P)[0] is None  # 3 cm: less than a quarter lane width
+
+
+def test_seen_within_counts_only_the_lines_near_enough():
+    """A glint or a wall's foot far up the view spans a long stretch of floor in few pixels:
+    measured `within` a distance, only the lines' length that near counts towards seeing a
+    lane; without it (0), all of it."""
+    d = 2.53 * DT.lane_width
+    beyond = line_pieces(-0.08, 'white', along=(d + 0.01, d + 0.31))
+    assert sum(piece.length for piece in beyond) > 4 * MIN_SEEN * DT.lane_width
+    assert measure(beyond, DT, P, within=d)[0] is None
+    assert measure(beyond, DT, P)[0] is not None  # all the lines count
+    within = line_pieces(-0.08, 'white', along=(d - 0.3, d))
+    assert measure(within, DT, P, within=d)[0] is not None
+    both = line_pieces(-0.08, 'white', along=(d - 0.1, d + 0.3))
+    assert near_seen(both, [-1] * len(both), d) == pytest.approx(0.1, abs=0.01)
+    assert near_seen(both, [0] * len(both), d) == 0  # pieces of no side: none
+
+
+def test_seen_within_starts_a_lane_only_from_near_lines_and_keeps_one_followed():
+    """With seen_within (in lane widths) a lane is started only by lines that near: a fresh
+    controller shown only far lines finds no lane, with the default it does. A lane followed
+    for CONFIRMED frames is still seen when only its far lines are left (a corner, a gap)."""
+    w = DT.lane_width
+    far = frame(line_pieces(-w / 2, 'white', along=(2.6 * w, 3.4 * w)))
+    near = ImprovedParams(lane='duckietown', memory=0.0, seen_within=2.53)
+    fresh = ImprovedController(LaneParams(), near)
+    assert fresh.p.seen_within == pytest.approx(2.53 * w)  # in lane widths, like the distances
+    fresh(far, 0.0)
+    assert fresh.estimate is None and fresh.lost_for > 0
+    default = ImprovedController(LaneParams(), ImprovedParams(lane='duckietown', memory=0.0))
+    default(far, 0.0)
+    assert default.estimate is not None and default.lost_for == 0.0
+    followed = ImprovedController(LaneParams(), near)
+    for k in range(CONFIRMED + 1):
+        followed(lane_beside(0.0), k * 0.125)
+    assert followed.confirmed >= CONFIRMED
+    followed(far, (CONFIRMED + 1) * 0.125)
+    assert followed.lost_for == 0.0 and followed.sides is not None
 
 
 def test_a_lane_the_robot_would_be_far_outside_is_not_its_own():
