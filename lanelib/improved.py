@@ -488,15 +488,15 @@ class ImprovedController:
         # on the floor: a splay allowed too took part of a corner ahead for one (the project's
         # simulator, inner loop: docs/benchmarks.md, forty-third session)
         from_motion = self.floor_pitch is not None and moved is not None
-        # a lane started (none confirmed to follow) needs its lines near: far up the view a
-        # glint or a wall's foot passes for a line; one followed is seen by all its lines
-        started = not (current and self.confirmed >= CONFIRMED)
+        # a confirmed lane followed: the gates defend it, and all its lines see it; a lane
+        # started needs its lines near (far up the view a glint or a wall's foot passes for one)
+        defended = current and self.confirmed >= CONFIRMED
         meas, fit = measure(pieces, self.profile, p, guide, anchor, self.held,
                             self.width if p.one_line_width == 'measured' else None, expected,
-                            splay=not from_motion, within=p.seen_within if started else 0.0)
+                            splay=not from_motion, within=0.0 if defended else p.seen_within)
         self.mark('lane')
         if meas is not None and current and not follows(prior, meas, p.turn_gate, p.shift_gate):
-            if self.confirmed >= CONFIRMED:
+            if defended:
                 meas, fit = None, None  # turned or moved further than it can have since
             else:
                 current = False  # a lane not yet confirmed gives way to the one found now
