@@ -74,6 +74,14 @@ class LaneEstimate:
         the arc it starts as, and the bend after (a polynomial in x cannot turn 90 degrees)."""
         return LaneFit(self.arc, None, 0, 0, None, bend=self.bend).point_at(distance)
 
+    def bent_within(self, distance):
+        """[1/m] the largest |curvature| of the centre line within `distance` [m] of the robot:
+        the arc's, or the bend's beyond it where that begins nearer."""
+        k = abs(self.curvature)
+        if self.bend is not None and self.bend[0] < distance:
+            k = max(k, abs(self.bend[1]))
+        return k
+
     def lateral_at(self, distance):
         """How far to the left [m] the centre line lies `distance` metres from the robot."""
         return self.point_at(distance)[1]

@@ -221,6 +221,10 @@ class ImprovedParams:
                            'lane widths/s', positive)
     curve_slowdown: float = setting(1.143, 'speed divided by (1 + this x |curvature|)',
                                     'lane widths', finite)
+    slow_ahead: float = setting(0.0, "slow down for the bend ahead, not only the turn asked: "
+                                'the speed divided by (1 + curve_slowdown x the largest '
+                                "|curvature| of the lane found within this far ahead); 0: "
+                                'the turn asked only', 'lane widths', non_negative)
     unsure_slowdown: float = setting(0.5, 'the share of the speed taken off when the estimate is '
                                      'unsure (times 1 - confidence): the speed is multiplied '
                                      'by 1 - this x (1 - confidence)', '', fraction)
@@ -263,7 +267,7 @@ class ImprovedParams:
     # divided by the lecture's 0.35 m lane, so that a narrower lane scales them all
     LANE_WIDTHS = ('roi_near', 'roi_far', 'v_max', 'v_min', 'curve_slowdown', 'lookahead',
                    'lookahead_min', 'memory_lookahead', 'memory_window', 'shift_gate',
-                   'seen_within')
+                   'seen_within', 'slow_ahead')
 
     def in_metres(self, lane_width):
         """The same settings with those in lane widths in metres and m/s, for a lane
@@ -575,7 +579,8 @@ class ImprovedController:
             return None
         if self.shift:  # the point `shift` to the left of the centre line (__init__)
             ax, ay = ax - self.shift * math.sin(heading), ay + self.shift * math.cos(heading)
-        return steer(ax, ay, 0.0, self.estimate.confidence, p, alpha=1.0)
+        return steer(ax, ay, 0.0, self.estimate.confidence, p, alpha=1.0,
+                     bend=self.bend_ahead())
 
     def remembered(self):
         """(linear.x, angular.z) at the remembered centre line memory_lookahead ahead, or None
@@ -601,7 +606,11 @@ class ImprovedController:
         `shift` to its left (the middle of the floor between the tapes)."""
         if self.shift:
             y += self.shift * math.hypot(1.0, slope)  # the parallel line, at the same x
-        return steer(x, y, slope, confidence, self.p)
+        return steer(x, y, slope, confidence, self.p, bend=self.bend_ahead())
+
+    def bend_ahead(self):
+        """[1/m] the largest |curvature| of the lane found within slow_ahead (0: off)."""
+        return self.estimate.bent_within(self.p.slow_ahead) if self.p.slow_ahead else 0.0
 
     def command(self):
         """What to do with the estimate (module doc)."""

@@ -26,7 +26,9 @@ heading to the lane where it is, with the curvature fed forward, the law is exac
 but measured so it ran wide on the outer lane's corners, for the reason above
 (docs/benchmarks.md, thirteenth session).
 
-Speed: v_max, divided by (1 + curve_slowdown |k_cmd|) on bends, times
+Speed: v_max, divided by (1 + curve_slowdown |k_cmd|) on bends (with slow_ahead, the sharper of
+|k_cmd| and the lane's sharpest bend ahead: on the inside of a corner's entry re-centring cancels
+the bend in k_cmd, and the robot came to the corner at full speed), times
 (1 - unsure_slowdown (1 - confidence)) (the lecture's Kobuki: half speed when the estimate is
 unsure), never below v_min; angular.z = v k_cmd within omega_max.
 """
@@ -42,17 +44,19 @@ def curvature(x, y, slope, alpha):
     return alpha * 2.0 * y / (x * x) + (1.0 - alpha) * slope / x
 
 
-def command(k_cmd, confidence, p):
+def command(k_cmd, confidence, p, bend=0.0):
     """(linear.x [m/s], angular.z [rad/s]) for a commanded curvature [1/m] and the estimate's
-    confidence (0..1); p: ImprovedParams in metres (module doc)."""
+    confidence (0..1); p: ImprovedParams in metres (module doc); bend [1/m]: the lane's
+    sharpest curvature ahead (slow_ahead), slowing as the turn asked would."""
     unsure = p.unsure_slowdown  # written so that 0.5 gives the bits 0.5 + 0.5 confidence gave
-    v = p.v_max / (1.0 + p.curve_slowdown * abs(k_cmd)) * ((1.0 - unsure) + unsure * confidence)
+    sharpest = max(abs(k_cmd), abs(bend))
+    v = p.v_max / (1.0 + p.curve_slowdown * sharpest) * ((1.0 - unsure) + unsure * confidence)
     v = float(np.clip(v, p.v_min, p.v_max))
     return v, float(np.clip(v * k_cmd, -p.omega_max, p.omega_max))
 
 
-def steer(x, y, slope, confidence, p, alpha=None):
+def steer(x, y, slope, confidence, p, alpha=None, bend=0.0):
     """(linear.x, angular.z) at the point (x, y) of the centre line with `slope` there, the
-    law's alpha p.lateral_gain unless given (1: pure pursuit)."""
+    law's alpha p.lateral_gain unless given (1: pure pursuit); bend: as in command."""
     return command(curvature(x, y, slope, p.lateral_gain if alpha is None else alpha),
-                   confidence, p)
+                   confidence, p, bend)

@@ -795,6 +795,48 @@ def test_speed_and_turn_rate_are_bounded():
     assert steer(0.8, 0.1, 0.0, 1.0, p) == command(curvature(0.8, 0.1, 0.0, 3.0), 1.0, p)
 
 
+
+def test_a_bend_ahead_slows_as_the_turn_asked_would_and_turns_nothing():
+    """command's bend (slow_ahead: the sharpest curvature of the lane ahead) slows the robot
+    as a turn asked of that curvature would, either way round, and leaves the turn rate the
+    turn asked's; the sharper of the two slows it."""
+    p = ImprovedParams().in_metres(0.35)
+    assert command(0.5, 1.0, p, bend=0.0) == command(0.5, 1.0, p)
+    v, omega = command(0.0, 1.0, p, bend=-4.0)
+    assert v == pytest.approx(command(4.0, 1.0, p)[0]) and v < p.v_max and omega == 0.0
+    assert command(0.0, 1.0, p, bend=4.0) == (v, omega)
+    assert command(6.0, 1.0, p, bend=4.0) == command(6.0, 1.0, p)  # the turn asked is sharper
+    assert steer(0.8, 0.1, 0.0, 1.0, p, bend=3.0) == command(curvature(0.8, 0.1, 0.0, 3.0), 1.0,
+                                                              p, 3.0)
+
+
+def test_the_sharpest_bend_within_a_distance_reads_the_arc_and_the_bend_begun_by_then():
+    est = LaneEstimate(0.0, 0.0, -0.5, 1.0, bend=(0.4, 5.0))  # bends right 1 /m, then left 5
+    assert est.bent_within(0.3) == pytest.approx(1.0)  # the bend begins beyond
+    assert est.bent_within(0.5) == pytest.approx(5.0)
+    assert LaneEstimate(0.0, 0.0, 0.5, 1.0).bent_within(10.0) == pytest.approx(1.0)
+
+
+def test_slow_ahead_slows_the_controller_before_a_bend_it_does_not_yet_turn_for():
+    """With slow_ahead (lane widths, like the distances) a lane straight at the robot that bends
+    within that distance slows the robot as the bend would; beyond it, or without the setting,
+    the speed is the straight's. The turn asked (its curvature: angular.z / linear.x) is the
+    same."""
+    w = DT.lane_width
+    bend = LaneEstimate(0.0, 0.0, 0.0, 1.0, bend=(2.0 * w, -4.0))
+    moves = {}
+    for ahead in (0.0, 1.5, 2.57):
+        c = ImprovedController(LaneParams(), ImprovedParams(lane='duckietown', memory=0.0,
+                                                            slow_ahead=ahead))
+        c.estimate, c.lost_for = bend, 0.0  # a lane in view
+        moves[ahead] = c.command()
+    assert moves[2.57].linear_x < moves[0.0].linear_x  # the bend begins within 2.57 w
+    assert moves[2.57].linear_x == pytest.approx(
+        command(-4.0, 1.0, ImprovedParams(lane='duckietown').in_metres(w))[0])
+    assert moves[1.5].linear_x == moves[0.0].linear_x  # it begins beyond 1.5 w
+    asked = [move.angular_z / move.linear_x for move in moves.values()]
+    assert asked == pytest.approx([asked[0]] * 3)
+
 def test_one_line_is_placed_half_the_width_last_measured_beside_it():
     """With both lines in view the width between them is measured (a camera pitched a little
     off, a track taped a little wider, make it more than the profile's); with one line left in
