@@ -25,7 +25,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from lanelib.lanefit import LaneFit, centre_path, find_lane, robot_offset
+from lanelib.lanefit import LaneFit, centre_path, find_lane, robot_offset, sharpest
 
 MIN_SEEN = 0.25  # [lane widths] of the lane's lines: less is no lane (a scrap, a glint)
 FULL_VIEW = 2.9  # [lane widths] of line seen counts as a full view (confidence 1)
@@ -77,10 +77,7 @@ class LaneEstimate:
     def bent_within(self, distance):
         """[1/m] the largest |curvature| of the centre line within `distance` [m] of the robot:
         the arc's, or the bend's beyond it where that begins nearer."""
-        k = abs(self.curvature)
-        if self.bend is not None and self.bend[0] < distance:
-            k = max(k, abs(self.bend[1]))
-        return k
+        return sharpest(self.curvature, self.bend, distance)
 
     def lateral_at(self, distance):
         """How far to the left [m] the centre line lies `distance` metres from the robot."""

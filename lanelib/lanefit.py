@@ -77,6 +77,14 @@ def robot_offset(e, psi, k):
     return -signed_distance(0.0, 0.0, e, psi, k)
 
 
+def sharpest(k, bend, within=math.inf):
+    """[1/m] the largest |curvature| of a centre line that bends k, and bend[1] from bend[0]
+    [m] along it (bend None: no second arc), within `within` [m] of the robot."""
+    if bend is not None and bend[0] < within:
+        return max(abs(k), abs(bend[1]))
+    return abs(k)
+
+
 def centre_path(arc, lengths, bend=None):
     """(x, y, heading) arrays of the centre line at arc lengths `lengths` [m] from where it
     crosses the robot's sideways axis: the arc (e, psi, k), and with a bend (s0, k2) from s0
@@ -269,7 +277,7 @@ class LaneFit:
         """(x, y, heading) of the centre line at `distance` [m] from the robot, along it; on
         a circle too small to reach that far, its point furthest from the robot (half way
         round: the way the lane goes; going on round would come back beside the robot)."""
-        k = max(abs(self.k), abs(self.bend[1]) if self.bend else 0.0)
+        k = sharpest(self.k, self.bend)
         s = np.linspace(0.0, min(3.0 * distance, 2 * math.pi / max(k, 1e-9)) + 1e-6, 400)
         x, y, h = centre_path((self.e, self.psi, self.k), s, self.bend)
         reach = np.hypot(x, y)

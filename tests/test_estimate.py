@@ -795,7 +795,6 @@ def test_speed_and_turn_rate_are_bounded():
     assert steer(0.8, 0.1, 0.0, 1.0, p) == command(curvature(0.8, 0.1, 0.0, 3.0), 1.0, p)
 
 
-
 def test_a_bend_ahead_slows_as_the_turn_asked_would_and_turns_nothing():
     """command's bend (slow_ahead: the sharpest curvature of the lane ahead) slows the robot
     as a turn asked of that curvature would, either way round, and leaves the turn rate the
@@ -836,6 +835,7 @@ def test_slow_ahead_slows_the_controller_before_a_bend_it_does_not_yet_turn_for(
     assert moves[1.5].linear_x == moves[0.0].linear_x  # it begins beyond 1.5 w
     asked = [move.angular_z / move.linear_x for move in moves.values()]
     assert asked == pytest.approx([asked[0]] * 3)
+
 
 def test_one_line_is_placed_half_the_width_last_measured_beside_it():
     """With both lines in view the width between them is measured (a camera pitched a little
