@@ -455,7 +455,8 @@ def build_parser():
                     help='no per-frame log lines (on ROS they go to the debug level)')
     io.add_argument('--open-timeout', type=seconds, default=10.0, metavar='SECONDS',
                     help='a URL source that gives no stream within this long is given up (exit '
-                         '2), and a read that long is a lost camera (default: 10)')
+                         '2), and a read that long is a lost camera; --calibration topic waits '
+                         'this long for the camera_info (default: 10)')
     io.add_argument('--wait-for-base', type=seconds, default=2.0, metavar='SECONDS',
                     help='on ROS, wait this long for a subscriber (the Kobuki base) before '
                          'the first command (default: 2)')

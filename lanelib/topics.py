@@ -180,7 +180,8 @@ def camera_from_topic(rospy, image_topic, timeout):
         info = rospy.wait_for_message(topic, CameraInfo, timeout=timeout)
     except rospy.ROSException:
         raise TopicError(f'--calibration topic: no sensor_msgs/CameraInfo on {topic} within '
-                         f'{timeout:g} s; the master has {published(rospy)}') from None
+                         f'{timeout:g} s (--open-timeout: a camera driver slow to start needs '
+                         f'longer); the master has {published(rospy)}') from None
     k = np.array(info.K, float).reshape(3, 3)
     if k[0, 0] == 0 or k[1, 1] == 0 or info.width <= 0 or info.height <= 0:
         raise TopicError(f'--calibration topic: the camera_info on {topic} holds no calibration '

@@ -161,6 +161,26 @@ class InfoOnly:
         return [('/cam/camera_info', 'sensor_msgs/CameraInfo')]
 
 
+class NoInfo(InfoOnly):
+    """A master whose camera driver has not published its camera_info yet."""
+
+    def wait_for_message(self, topic, kind, timeout):
+        self.waited = timeout
+        raise self.ROSException('timeout exceeded')
+
+
+def test_no_camera_info_in_time_names_the_wait_and_the_flag_that_sets_it():
+    """Before: a simulator slow to load its map published its camera_info after the 10 s
+    waited, and the error did not say which flag waits longer (gym-duckietown's MOOC_modcon)."""
+    master = NoInfo(None)
+    with pytest.raises(TopicError) as e:
+        camera_from_topic(master, '/cam/image_raw', 25.0)
+    assert master.waited == 25.0
+    said = str(e.value)
+    assert 'no sensor_msgs/CameraInfo on /cam/camera_info within 25 s' in said
+    assert '--open-timeout' in said and '/cam/camera_info (sensor_msgs/CameraInfo)' in said
+
+
 def camera_info(K=None, D=None, model='plumb_bob'):
     from sensor_msgs.msg import CameraInfo
 
