@@ -412,7 +412,8 @@ def build_parser():
                     help="'lecture' (the lecture's camera matrix, default), 'duckiebot' "
                          "(Duckietown's default camera; 'duckiebot-rectified' for its frames "
                          "rectified already), 'none', a ROS camera_info YAML path, or 'topic': "
-                         "the camera_info beside the --source ros: topic (default: the robot "
+                         "the camera_info beside the --source ros: topic, or the first one "
+                         "recorded beside the image topic of a --source bag (default: the robot "
                          "preset's, else lecture)")
     io.add_argument('--mounting', metavar='FILE',
                     help="the improved controller's camera mounting (height, pitch_deg, "

@@ -5,6 +5,8 @@
                   sensor_msgs/CompressedImage (JPEG) on /kobuki_lane/debug_image/compressed
     BagSource     --source run.bag --image-topic T: sensor_msgs/Image (bgr8, rgb8, bgra8, rgba8,
                   mono8, mono16, 8UC1, 8UC3) or sensor_msgs/CompressedImage, in recorded order
+    camera_from_bag  --calibration topic with such a source: the first sensor_msgs/CameraInfo
+                  recorded beside the image topic, as on the robot
 
 Bags written here open in Debian's `rosbag info` and `rosbag.Bag`; the tests check both ways.
 """
@@ -39,6 +41,54 @@ def _describe(connections):
     return ', '.join(f'{t} ({m})' for t, m in topics) or 'no topics at all'
 
 
+def _images(reader, path, topic=None):
+    """(topic, connections) of the bag's images on `topic`, or on its one image topic; BagError
+    saying what the bag has when that is not one."""
+    conns = list(reader.connections)
+    images = [c for c in conns if c.msgtype in IMAGE_TYPES]
+    if topic is None:
+        if len({c.topic for c in images}) != 1:
+            raise BagError(f"'{path}': say which image topic with --image-topic; the bag "
+                           f'has {_describe(conns)}')
+        topic = images[0].topic
+    chosen = [c for c in images if c.topic == topic]
+    if not chosen:
+        raise BagError(f"'{path}' has no sensor_msgs/Image or CompressedImage messages on "
+                       f"'{topic}'; it has {_describe(conns)}")
+    return topic, chosen
+
+
+def camera_from_bag(path, image_topic=None):
+    """(lanelib.camera.Camera, camera_info topic) from the bag's first sensor_msgs/CameraInfo
+    beside its image topic (`image_topic`, or its only one): --calibration topic on a recorded
+    run, as on the robot. BagError if the bag cannot be read or has none there; TopicError
+    (lanelib.topics) if the one it has holds no usable calibration."""
+    from rosbags.rosbag1 import Reader, ReaderError
+
+    from lanelib.topics import camera_from_info, info_topic
+
+    try:
+        reader = Reader(path)
+        reader.open()
+    except (ReaderError, OSError, ValueError) as e:
+        raise BagError(f"cannot open '{path}' as a ROS 1 bag: {e}") from None
+    try:
+        image_topic = _images(reader, path, image_topic)[0]
+        topic = info_topic(image_topic)
+        infos = [c for c in reader.connections
+                 if c.topic == topic and c.msgtype == 'sensor_msgs/msg/CameraInfo']
+        for conn, _, raw in reader.messages(connections=infos) if infos else ():
+            # (no connections given, rosbags reads them all)
+            info = typestore().deserialize_ros1(raw, conn.msgtype)
+            where = f"the first camera_info on {topic} in '{path}'"
+            return camera_from_info(info, where, topic), topic
+        raise BagError(f"--calibration topic: '{path}' has no sensor_msgs/CameraInfo on {topic} "
+                       f'(beside {image_topic}); it has {_describe(reader.connections)}: give '
+                       '--calibration FILE (a camera_info YAML), or record the camera_info too')
+    finally:
+        reader.close()
+
+
 class BagSource:
     """Image messages from a ROS 1 bag as frames; labels are the message stamps' seconds."""
 
@@ -56,21 +106,11 @@ class BagSource:
             self._reader.open()
         except (ReaderError, OSError, ValueError) as e:
             raise BagError(f"cannot open '{path}' as a ROS 1 bag: {e}") from None
-        conns = list(self._reader.connections)
-        images = [c for c in conns if c.msgtype in IMAGE_TYPES]
-        if topic is None:
-            if len({c.topic for c in images}) != 1:
-                has = _describe(conns)
-                self._reader.close()
-                raise BagError(f"'{path}': say which image topic with --image-topic; the bag "
-                               f'has {has}')
-            topic = images[0].topic
-        chosen = [c for c in images if c.topic == topic]
-        if not chosen:
-            has = _describe(conns)
+        try:
+            topic, chosen = _images(self._reader, path, topic)
+        except BagError:
             self._reader.close()
-            raise BagError(f"'{path}' has no sensor_msgs/Image or CompressedImage messages on "
-                           f"'{topic}'; it has {has}")
+            raise
         self.topic = topic
         self.total = sum(c.msgcount for c in chosen)
         self._messages = self._reader.messages(connections=chosen)

@@ -6,7 +6,7 @@ import sys
 
 import cv2
 
-from lanelib.files import output_problem
+from lanelib.files import is_bag, output_problem
 from lanelib.topics import topic_of, topic_problem
 
 
@@ -71,10 +71,10 @@ def check_outputs_apart(prog, inputs, outputs, force, stages=None):
 
 def calibration_problem(calibration, source):
     """Why `calibration` cannot be used with --source `source`, or None."""
-    if calibration == 'topic' and topic_of(source) is None:
-        return (f"--calibration topic reads the camera_info beside a ROS image topic, and "
-                f"--source '{source}' is not one: give --source ros:TOPIC (e.g. "
-                'ros:/camera/rgb/image_raw), or --calibration lecture, none or a FILE')
+    if calibration == 'topic' and topic_of(source) is None and not is_bag(source):
+        return (f"--calibration topic reads the camera_info beside a ROS image topic, live or "
+                f"in a bag, and --source '{source}' is neither: give --source ros:TOPIC (e.g. "
+                'ros:/camera/rgb/image_raw) or a .bag, or --calibration lecture, none or a FILE')
     return None
 
 

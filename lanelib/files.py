@@ -1,5 +1,5 @@
-"""Files the programs read and write: YAML read the way YAML 1.2 and JSON read numbers, and the
-check that an output can be written before a run starts."""
+"""Files the programs read and write: YAML read the way YAML 1.2 and JSON read numbers, the
+check that an output can be written before a run starts, and whether a source is a bag."""
 
 import os
 
@@ -13,6 +13,12 @@ def output_problem(path):
     if not os.access(folder, os.W_OK):
         return f"folder '{folder}' is not writable"
     return None
+
+
+def is_bag(spec):
+    """Whether --source names a ROS 1 bag (a file ending in .bag)."""
+    spec = str(spec)
+    return spec.lower().endswith('.bag') and os.path.isfile(spec)
 
 
 def yaml_loader():

@@ -15,8 +15,10 @@ import sys
 import time
 from dataclasses import fields
 
+from lanelib.bags import camera_from_bag
 from lanelib.camera import describe, load_calibration
 from lanelib.cli import calibration_problem, fail
+from lanelib.files import is_bag
 from lanelib.improved import ImprovedParams
 from lanelib.mounting import mounting_settings
 from lanelib.outputs import Outputs, Progress, VideoSink, summary
@@ -165,7 +167,11 @@ def set_up(prog, args, ros, topic_ros, lecture, make_controller):
         if problem:
             raise ValueError(problem)
         camera = None if args.calibration == 'topic' else load_calibration(args.calibration)
-        if args.calibration == 'topic':
+        if args.calibration == 'topic' and is_bag(args.source):  # a recorded run, as live
+            camera, info = camera_from_bag(args.source, args.image_topic)
+            ros.loginfo('calibration from the first camera_info on %s in %s: %s', info,
+                        args.source, describe(camera))
+        elif args.calibration == 'topic':
             camera = camera_from_topic(topic_ros, topic, args.open_timeout)
             ros.loginfo('calibration from the first camera_info beside %s: %s', topic,
                         describe(camera))

@@ -21,6 +21,7 @@ import cv2
 
 from lanelib.camera import aspect_problem
 from lanelib.cli import warning
+from lanelib.files import is_bag
 from lanelib.topics import topic_of, topic_problem
 
 IMAGE_EXTENSIONS = ('.png', '.jpg', '.jpeg', '.bmp', '.tif', '.tiff', '.webp', '.pgm', '.ppm',
@@ -311,7 +312,7 @@ def open_source(spec, warn=None, image_topic=None, rospy=None, fresh=0.4, timeou
         if problem or rospy is None:
             raise SourceError(problem or f"cannot open '{spec}': a live topic needs a ROS master")
         return TopicSource(rospy, topic, fresh=fresh, wait=fresh)
-    if spec.lower().endswith('.bag') and os.path.isfile(spec):
+    if is_bag(spec):
         from lanelib.bags import BagError, BagSource
 
         try:

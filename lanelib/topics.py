@@ -173,8 +173,6 @@ def camera_from_topic(rospy, image_topic, timeout):
     that a camera_info YAML would be refused for (the same checks: lanelib.camera)."""
     from sensor_msgs.msg import CameraInfo
 
-    from lanelib.camera import CalibrationError, checked_camera
-
     topic = info_topic(image_topic)
     try:
         info = rospy.wait_for_message(topic, CameraInfo, timeout=timeout)
@@ -182,17 +180,26 @@ def camera_from_topic(rospy, image_topic, timeout):
         raise TopicError(f'--calibration topic: no sensor_msgs/CameraInfo on {topic} within '
                          f'{timeout:g} s (--open-timeout: a camera driver slow to start needs '
                          f'longer); the master has {published(rospy)}') from None
+    return camera_from_info(info, f'the camera_info on {topic}', topic)
+
+
+def camera_from_info(info, where, name):
+    """A lanelib.camera.Camera from a sensor_msgs/CameraInfo (rospy's, or a bag's as rosbags
+    reads it: the same fields), `where` it came from for the messages, `name` when its header
+    names no camera; TopicError if it holds no calibration or one that a camera_info YAML
+    would be refused for (the same checks: lanelib.camera)."""
+    from lanelib.camera import CalibrationError, checked_camera
+
     k = np.array(info.K, float).reshape(3, 3)
     if k[0, 0] == 0 or k[1, 1] == 0 or info.width <= 0 or info.height <= 0:
-        raise TopicError(f'--calibration topic: the camera_info on {topic} holds no calibration '
+        raise TopicError(f'--calibration topic: {where} holds no calibration '
                          f'(fx {k[0, 0]:g}, fy {k[1, 1]:g}, {info.width}x{info.height}): '
                          'calibrate the camera (ROS camera_calibration, or calibration.py '
                          '--images) and give --calibration FILE')
     try:
-        return checked_camera(info.header.frame_id or topic, k, info.D,
+        return checked_camera(info.header.frame_id or name, k, np.asarray(info.D, float),
                               (info.width, info.height), info.distortion_model or 'plumb_bob',
-                              f'--calibration topic: the camera_info on {topic}',
-                              ('K', 'D', 'distortion_model'))
+                              f'--calibration topic: {where}', ('K', 'D', 'distortion_model'))
     except CalibrationError as e:
         raise TopicError(f'{e}; calibrate the camera, or give --calibration FILE') from None
 

@@ -222,7 +222,8 @@ def test_a_live_camera_that_changes_its_size_is_stopped_for():
 
 def test_calibration_topic_without_a_topic_is_a_usage_error():
     one_line_error(run(NODE, '--source', SAMPLES, '--calibration', 'topic'),
-                   '--calibration topic reads the camera_info beside a ROS image topic')
+                   '--calibration topic reads the camera_info beside a ROS image topic, live '
+                   'or in a bag')
 
 
 def test_a_picture_too_small_for_a_chessboard_is_said_so(tmp_path):

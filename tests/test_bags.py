@@ -254,3 +254,74 @@ def test_a_slow_disk_does_not_lengthen_the_stretch_a_kill_can_lose(tmp_path, mon
         recorder.twist(clock[0], 0.05, 0.0)
     recorder.close()
     assert on_disk[0] > 30 and max(waiting) <= 4, waiting
+
+
+def write_bag_with_camera_info(path, frames, k, size=(640, 480),
+                               info_topic='/camera/rgb/camera_info'):
+    """write_ros_bag's recording with a sensor_msgs/CameraInfo (real rosbag's API) written
+    first on `info_topic`, as `rosbag record` of a camera driver's two topics has them."""
+    import rosbag
+    import rospy
+    from sensor_msgs.msg import CameraInfo
+
+    write_ros_bag(path, frames)
+    info = CameraInfo(width=size[0], height=size[1], distortion_model='plumb_bob',
+                      D=[-0.1, 0.01, 0.0, 0.0, 0.0], K=list(k))
+    info.header.frame_id = 'usb_cam'
+    with rosbag.Bag(str(path), 'a') as bag:
+        bag.write(info_topic, info, rospy.Time(1700000000, 0))
+
+
+def test_calibration_topic_on_a_bag_reads_the_camera_info_recorded_beside_its_images(tmp_path):
+    """--calibration topic on a recorded run is the camera_info recorded with it: the
+    decisions are those with the same calibration given as a file, not the lecture's."""
+    frames = samples(8)
+    k = [520.0, 0.0, 330.0, 0.0, 515.0, 236.0, 0.0, 0.0, 1.0]
+    path = tmp_path / 'run.bag'
+    write_bag_with_camera_info(path, frames, k)
+    yaml_file = tmp_path / 'camera.yaml'
+    yaml_file.write_text('image_width: 640\nimage_height: 480\ncamera_name: usb_cam\n'
+                         'camera_matrix: {rows: 3, cols: 3, data: %s}\n'
+                         'distortion_model: plumb_bob\n'
+                         'distortion_coefficients: {rows: 1, cols: 5, '
+                         'data: [-0.1, 0.01, 0, 0, 0]}\n'
+                         % k)
+    runs = {}
+    for calibration in ('topic', str(yaml_file), 'lecture'):
+        out = tmp_path / f'{len(runs)}.jsonl'
+        proc = subprocess.run([sys.executable, NODE, '--source', str(path), '--calibration',
+                               calibration, '--dry-run', '--decisions', str(out)],
+                              cwd=REPO, capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 0, proc.stderr
+        runs[calibration] = [(r['lines'], r['theta']) for r in read_jsonl(out)], proc
+    said = runs['topic'][1].stdout + runs['topic'][1].stderr
+    assert (f"calibration from the first camera_info on /camera/rgb/camera_info in {path}: "
+            "camera 'usb_cam' at 640x480: fx=520.00 fy=515.00 cx=330.00 cy=236.00") in said
+    assert runs['topic'][0] == runs[str(yaml_file)][0] and len(runs['topic'][0]) == 8
+    assert runs['topic'][0] != runs['lecture'][0]
+
+
+def test_calibration_topic_on_a_bag_without_a_camera_info_there_says_what_the_bag_has(
+        tmp_path):
+    path = tmp_path / 'run.bag'
+    write_bag_with_camera_info(path, samples(2), [500, 0, 320, 0, 500, 240, 0, 0, 1],
+                               info_topic='/elsewhere/camera_info')
+    proc = subprocess.run([sys.executable, NODE, '--source', str(path), '--calibration', 'topic',
+                           '--dry-run'], cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and 'Traceback' not in proc.stderr
+    assert (f"--calibration topic: '{path}' has no sensor_msgs/CameraInfo on "
+            '/camera/rgb/camera_info (beside /camera/rgb/image_raw); it has '
+            '/camera/rgb/image_raw (sensor_msgs/Image), /elsewhere/camera_info '
+            '(sensor_msgs/CameraInfo), /odom_note (std_msgs/String): give --calibration FILE'
+            in proc.stderr)
+
+
+def test_calibration_topic_on_a_bag_whose_camera_info_is_uncalibrated_is_refused(tmp_path):
+    """A driver with no calibration file publishes K all zero: refused as on the live topic."""
+    path = tmp_path / 'run.bag'
+    write_bag_with_camera_info(path, samples(2), [0.0] * 9)
+    proc = subprocess.run([sys.executable, NODE, '--source', str(path), '--calibration', 'topic',
+                           '--dry-run'], cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and 'Traceback' not in proc.stderr
+    assert ('--calibration topic: the first camera_info on /camera/rgb/camera_info in '
+            f"'{path}' holds no calibration (fx 0, fy 0, 640x480)" in proc.stderr)
