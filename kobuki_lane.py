@@ -273,6 +273,14 @@ class LaneFollower:
         if self.stop_requested is None:
             self.stop_requested = reason
 
+    def frame_time(self, label, read_at):
+        """When the controller takes the frame to have been seen: when it was recorded, for a
+        bag's frame (its label; the lane memory then moves as far as the robot could in the
+        time between two recorded frames, not in one loop period), unless odometry on the
+        loop's clock comes too; else when it was read."""
+        timed = getattr(self.source, 'timed', False) and isinstance(label, float)
+        return label if timed and getattr(self.controller, 'odometry', None) is None else read_at
+
     def step(self, frame, label, read_at=None):
         """Process one frame and publish its command; returns the decision record.
 
@@ -285,7 +293,7 @@ class LaneFollower:
         if self.tuning is not None:
             self.tuning.apply()  # a setting changed live (lanelib/tuning.py): from this frame
         detection = self.controller.perceive(frame, keep_stages=self.outputs.wants_stages())
-        command = self.controller(detection, read_at)
+        command = self.controller(detection, self.frame_time(label, read_at))
         notice = self.controller.notice()  # once, when there is something to tell the user
         if notice:
             ros.logwarn('%s', notice)

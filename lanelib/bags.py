@@ -93,6 +93,7 @@ class BagSource:
     """Image messages from a ROS 1 bag as frames; labels are the message stamps' seconds."""
 
     live = False
+    timed = True  # the labels are when the frames were recorded (LaneFollower.frame_time)
 
     def __init__(self, path, topic=None, warn=None):
         self.skipped = 0

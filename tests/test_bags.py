@@ -325,3 +325,23 @@ def test_calibration_topic_on_a_bag_whose_camera_info_is_uncalibrated_is_refused
     assert proc.returncode == 2 and 'Traceback' not in proc.stderr
     assert ('--calibration topic: the first camera_info on /camera/rgb/camera_info in '
             f"'{path}' holds no calibration (fx 0, fy 0, 640x480)" in proc.stderr)
+
+
+def test_a_bags_frames_are_timed_as_recorded_for_the_lane_memory(tmp_path):
+    """Frames recorded 0.1 s apart, played in a dry run at the default 4 Hz: the improved
+    controller counts the time without a lane by the recordings' times, not the loop's 0.25 s
+    a frame (its memory moves the same way: as far as the robot drove between two frames)."""
+    import rosbag
+    import rospy
+
+    frames = samples(4) + [np.full((480, 640, 3), 120, np.uint8)] * 4  # the tape, then none
+    path = tmp_path / 'run.bag'
+    with rosbag.Bag(str(path), 'w') as bag:
+        for i, frame in enumerate(frames):
+            bag.write('/camera/rgb/image_raw', ros_image(frame, 'bgr8'),
+                      rospy.Time(1700000000, i * 100_000_000))
+    out = tmp_path / 'd.jsonl'
+    assert main(['--source', str(path), '--controller', 'improved', '--dry-run', '--quiet',
+                 '--decisions', str(out)]) == 0
+    lost = [r['lane_lost_s'] for r in read_jsonl(out)]
+    assert lost == pytest.approx([0.0] * 4 + [0.1, 0.2, 0.3, 0.4])
