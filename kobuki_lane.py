@@ -276,10 +276,11 @@ class LaneFollower:
     def frame_time(self, label, read_at):
         """When the controller takes the frame to have been seen: when it was recorded, for a
         bag's frame (its label; the lane memory then moves as far as the robot could in the
-        time between two recorded frames, not in one loop period), unless odometry on the
-        loop's clock comes too; else when it was read."""
+        time between two recorded frames, not in one loop period), unless odometry comes on
+        the loop's clock (live; the bag's own is on the bag's); else when it was read."""
         timed = getattr(self.source, 'timed', False) and isinstance(label, float)
-        return label if timed and getattr(self.controller, 'odometry', None) is None else read_at
+        odometry = getattr(self.controller, 'odometry', None)
+        return label if timed and getattr(odometry, 'timed', True) else read_at
 
     def step(self, frame, label, read_at=None):
         """Process one frame and publish its command; returns the decision record.
@@ -429,8 +430,9 @@ def build_parser():
                          '--camera-height and the like, and private parameters, override it')
     io.add_argument('--odom', metavar='TOPIC',
                     help="the improved controller's lane memory follows nav_msgs/Odometry on "
-                         "this topic while it comes (default: /odom, kobuki_node's), else "
-                         "dead-reckons on the commands; 'none': always dead reckoning")
+                         "this topic while it comes (default: /odom, kobuki_node's; in a dry "
+                         "run over a bag, the bag's, as recorded), else dead-reckons on the "
+                         "commands; 'none': always dead reckoning")
     io.add_argument('--dry-run', action='store_true',
                     help='no ROS: record the commands instead of publishing them; over files '
                          'this runs as fast as it can')

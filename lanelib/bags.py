@@ -89,6 +89,78 @@ def camera_from_bag(path, image_topic=None):
         reader.close()
 
 
+class _Feed:
+    """What lanelib.topics.Odometry needs of rospy, for messages handed to it from a bag: its
+    one subscriber's callback kept, the node's logging."""
+
+    def __init__(self, ros):
+        self.loginfo, self.logwarn, self.callback = ros.loginfo, ros.logwarn, None
+
+    def Subscriber(self, topic, msg_type, callback, queue_size=None):  # noqa: N802 (rospy's)
+        self.callback = callback
+        return self
+
+    def unregister(self):
+        self.callback = None
+
+
+class BagOdometry:
+    """The nav_msgs/Odometry recorded in a bag, for the improved controller replaying the
+    bag's frames: each message reaches a lanelib.topics.Odometry (its checks, its timeout) when
+    the frames' recorded time reaches the time it was recorded, as it came on the robot.
+    pose(now) takes `now` on the bag's clock (the frame's label: LaneFollower.frame_time)."""
+
+    timed = True
+
+    def __init__(self, path, topic, ros):
+        from rosbags.rosbag1 import Reader, ReaderError
+
+        from lanelib.topics import Odometry
+
+        try:
+            with Reader(path) as reader:
+                conns = [c for c in reader.connections
+                         if c.topic == topic and c.msgtype == 'nav_msgs/msg/Odometry']
+                store = typestore()
+                self._messages = [(stamp * 1e-9, store.deserialize_ros1(raw, conn.msgtype))
+                                  for conn, stamp, raw in
+                                  (reader.messages(connections=conns) if conns else ())]
+        except (ReaderError, OSError, ValueError) as e:
+            raise BagError(f"cannot open '{path}' as a ROS 1 bag: {e}") from None
+        self.topic, self._next, self._now = topic, 0, -np.inf
+        self._feed = _Feed(ros)
+        self._odometry = Odometry(self._feed, topic, msg_type=object, clock=lambda: self._now)
+
+    def __len__(self):
+        return len(self._messages)
+
+    def pose(self, now):
+        while self._next < len(self._messages) and self._messages[self._next][0] <= now:
+            self._now, msg = self._messages[self._next]
+            self._next += 1
+            if self._feed.callback is not None:
+                self._feed.callback(msg)
+        self._now = now
+        return self._odometry.pose(now)
+
+    def release(self):
+        self._odometry.release()
+
+
+def odometry_from_bag(path, topic, ros):
+    """BagOdometry for --odom TOPIC (default /odom) over a --source bag, or None for 'none' or
+    when the bag has no odometry there (said: the lane memory then dead-reckons)."""
+    topic = topic or '/odom'
+    if topic == 'none':
+        return None
+    odometry = BagOdometry(path, topic, ros)
+    if not len(odometry):
+        ros.loginfo('no nav_msgs/Odometry on %s in %s: the lane memory dead-reckons on the '
+                    'commands', topic, path)
+        return None
+    return odometry
+
+
 class BagSource:
     """Image messages from a ROS 1 bag as frames; labels are the message stamps' seconds."""
 

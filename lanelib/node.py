@@ -15,7 +15,7 @@ import sys
 import time
 from dataclasses import fields
 
-from lanelib.bags import camera_from_bag
+from lanelib.bags import camera_from_bag, odometry_from_bag
 from lanelib.camera import describe, load_calibration
 from lanelib.cli import calibration_problem, fail
 from lanelib.files import is_bag
@@ -176,8 +176,11 @@ def set_up(prog, args, ros, topic_ros, lecture, make_controller):
             ros.loginfo('calibration from the first camera_info beside %s: %s', topic,
                         describe(camera))
 
-        odometry = (odometry_from(topic_ros, args.odom, clock=ros.get_time)
-                    if name == 'improved' else None)
+        odometry = None
+        if name == 'improved' and topic_ros is None and is_bag(args.source):  # a dry run
+            odometry = odometry_from_bag(args.source, args.odom, ros)  # on the bag's clock
+        elif name == 'improved':
+            odometry = odometry_from(topic_ros, args.odom, clock=ros.get_time)
         controller = make_controller(name, params, camera, improved, pipeline_for(args),
                                      odometry)
         for warning in getattr(controller, 'warnings', list)():

@@ -345,3 +345,39 @@ def test_a_bags_frames_are_timed_as_recorded_for_the_lane_memory(tmp_path):
                  '--decisions', str(out)]) == 0
     lost = [r['lane_lost_s'] for r in read_jsonl(out)]
     assert lost == pytest.approx([0.0] * 4 + [0.1, 0.2, 0.3, 0.4])
+
+
+def test_a_bags_odometry_moves_the_lane_memory_as_it_came_on_the_robot(tmp_path):
+    """Odometry recorded in the bag (nav_msgs/Odometry on /odom) reaches the improved
+    controller in a dry run at the frames' recorded times: the robot turning left 0.1 rad
+    every 0.1 s while no lane is in view turns the lane predicted right by as much; with
+    --odom none it is dead-reckoned on the commands (about straight on), and stays."""
+    import math
+
+    import rosbag
+    import rospy
+    from nav_msgs.msg import Odometry
+
+    frames = samples(4) + [np.full((480, 640, 3), 120, np.uint8)] * 3
+    path = tmp_path / 'run.bag'
+    with rosbag.Bag(str(path), 'w') as bag:
+        for i, frame in enumerate(frames):
+            stamp = rospy.Time(1700000000, i * 100_000_000)
+            yaw = 0.1 * max(0, i - 3)  # turning left from the last frame with the tape
+            odom = Odometry()
+            odom.pose.pose.orientation.z, odom.pose.pose.orientation.w = (math.sin(yaw / 2),
+                                                                          math.cos(yaw / 2))
+            bag.write('/odom', odom, stamp - rospy.Duration(0, 10_000_000))
+            bag.write('/camera/rgb/image_raw', ros_image(frame, 'bgr8'), stamp)
+    headings = {}
+    for odom in ('/odom', 'none'):
+        out = tmp_path / f'{odom.strip("/")}.jsonl'
+        assert main(['--source', str(path), '--image-topic', '/camera/rgb/image_raw',
+                     '--controller', 'improved', '--odom', odom, '--dry-run',
+                     '--quiet', '--decisions', str(out)]) == 0
+        headings[odom] = [r['heading_rad'] for r in read_jsonl(out)]
+    seen = headings['/odom'][3]  # the last frame with the tape
+    assert headings['/odom'][4:] == pytest.approx([seen + 0.1, seen + 0.2, seen + 0.3],
+                                                  abs=0.01)
+    seen = headings['none'][3]
+    assert abs(headings['none'][-1] - seen) < 0.05  # the commands: almost straight on
