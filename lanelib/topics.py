@@ -266,7 +266,10 @@ class Odometry:
         if live != self.live:
             if live:
                 self.rospy.loginfo('odometry on %s: the lane memory follows it', self.topic)
-            elif self.live is not None or item is None:
+            elif item is None:  # at the start: none has come yet
+                self.rospy.logwarn('no odometry on %s yet: the lane memory dead-reckons on the '
+                                   'commands sent until it comes', self.topic)
+            elif self.live is not None:
                 self.rospy.logwarn('no odometry on %s for %.1f s: the lane memory dead-reckons '
                                    'on the commands sent', self.topic, self.timeout)
             self.live = live
