@@ -58,28 +58,39 @@ def _images(reader, path, topic=None):
     return topic, chosen
 
 
-def camera_from_bag(path, image_topic=None):
-    """(lanelib.camera.Camera, camera_info topic) from the bag's first sensor_msgs/CameraInfo
-    beside its image topic (`image_topic`, or its only one): --calibration topic on a recorded
-    run, as on the robot. BagError if the bag cannot be read or has none there; TopicError
-    (lanelib.topics) if the one it has holds no usable calibration."""
+def _open(path):
+    """An open rosbags Reader of `path`; BagError when it cannot be opened as a ROS 1 bag."""
     from rosbags.rosbag1 import Reader, ReaderError
-
-    from lanelib.topics import camera_from_info, info_topic
 
     try:
         reader = Reader(path)
         reader.open()
     except (ReaderError, OSError, ValueError) as e:
         raise BagError(f"cannot open '{path}' as a ROS 1 bag: {e}") from None
+    return reader
+
+
+def _recorded(reader, topic, msgtype):
+    """(stamp [ns], message) of each `msgtype` message on `topic`, in recorded order; none
+    when the bag has none there (given no connections, rosbags reads them all)."""
+    conns = [c for c in reader.connections if c.topic == topic and c.msgtype == msgtype]
+    store = typestore()
+    for conn, stamp, raw in reader.messages(connections=conns) if conns else ():
+        yield stamp, store.deserialize_ros1(raw, conn.msgtype)
+
+
+def camera_from_bag(path, image_topic=None):
+    """(lanelib.camera.Camera, camera_info topic) from the bag's first sensor_msgs/CameraInfo
+    beside its image topic (`image_topic`, or its only one): --calibration topic on a recorded
+    run, as on the robot. BagError if the bag cannot be read or has none there; TopicError
+    (lanelib.topics) if the one it has holds no usable calibration."""
+    from lanelib.topics import camera_from_info, info_topic
+
+    reader = _open(path)
     try:
         image_topic = _images(reader, path, image_topic)[0]
         topic = info_topic(image_topic)
-        infos = [c for c in reader.connections
-                 if c.topic == topic and c.msgtype == 'sensor_msgs/msg/CameraInfo']
-        for conn, _, raw in reader.messages(connections=infos) if infos else ():
-            # (no connections given, rosbags reads them all)
-            info = typestore().deserialize_ros1(raw, conn.msgtype)
+        for _, info in _recorded(reader, topic, 'sensor_msgs/msg/CameraInfo'):
             where = f"the first camera_info on {topic} in '{path}'"
             return camera_from_info(info, where, topic), topic
         raise BagError(f"--calibration topic: '{path}' has no sensor_msgs/CameraInfo on {topic} "
@@ -113,20 +124,18 @@ class BagOdometry:
     timed = True
 
     def __init__(self, path, topic, ros):
-        from rosbags.rosbag1 import Reader, ReaderError
+        from rosbags.rosbag1 import ReaderError
 
         from lanelib.topics import Odometry
 
+        reader = _open(path)
         try:
-            with Reader(path) as reader:
-                conns = [c for c in reader.connections
-                         if c.topic == topic and c.msgtype == 'nav_msgs/msg/Odometry']
-                store = typestore()
-                self._messages = [(stamp * 1e-9, store.deserialize_ros1(raw, conn.msgtype))
-                                  for conn, stamp, raw in
-                                  (reader.messages(connections=conns) if conns else ())]
-        except (ReaderError, OSError, ValueError) as e:
+            self._messages = [(stamp * 1e-9, msg) for stamp, msg in
+                              _recorded(reader, topic, 'nav_msgs/msg/Odometry')]
+        except (ReaderError, OSError, ValueError) as e:  # a bag cut short
             raise BagError(f"cannot open '{path}' as a ROS 1 bag: {e}") from None
+        finally:
+            reader.close()
         self.topic, self._next, self._now = topic, 0, -np.inf
         self._feed = _Feed(ros)
         self._odometry = Odometry(self._feed, topic, msg_type=object, clock=lambda: self._now)
@@ -170,15 +179,9 @@ class BagSource:
     def __init__(self, path, topic=None, warn=None):
         self.skipped = 0
         self._warn = warn or warning
-        from rosbags.rosbag1 import Reader, ReaderError
-
         self.name = str(path)
         self._store = typestore()
-        try:
-            self._reader = Reader(path)
-            self._reader.open()
-        except (ReaderError, OSError, ValueError) as e:
-            raise BagError(f"cannot open '{path}' as a ROS 1 bag: {e}") from None
+        self._reader = _open(path)
         try:
             topic, chosen = _images(self._reader, path, topic)
         except BagError:
