@@ -477,15 +477,9 @@ def _fit_seeds(seeds, pieces, points, allowed, lane_width, priors, limits, regio
                    _askew(lanes, pieces))
     on = np.repeat(sides, POINTS, axis=1)
     left, right = ((on == 1) * w).sum(axis=1), ((on == -1) * w).sum(axis=1)
-    # line where only floor should be: in the middle half of the lane, and a tape of a colour
-    # only one line has (Duckietown's yellow centre line, the left) anywhere past the centre
-    # towards the other line, to just beyond it (within the fit's last tolerance)
-    d = distance.reshape(len(lanes), -1, POINTS).mean(axis=2)
-    tol = TOLERANCES[-1] * lane_width
-    only_left, only_right = allowed[:, 0] & ~allowed[:, 1], allowed[:, 1] & ~allowed[:, 0]
-    floor = ((np.abs(d) < halves / 2) | (only_left & (d < 0) & (d > -halves - tol)) |
-             (only_right & (d > 0) & (d < halves + tol)))
-    inside = (np.repeat(floor & (sides == 0), POINTS, axis=1) * w).sum(axis=1)
+    # line in the middle half of the lane, where only floor should be
+    middle = np.abs(distance.reshape(len(lanes), -1, POINTS).mean(axis=2)) < halves / 2
+    inside = (np.repeat(middle & (sides == 0), POINTS, axis=1) * w).sum(axis=1)
     # the robot outside the lane it names
     outside = np.maximum(0.0, np.abs(robot_offset(*lanes[:, :3].T)) - half)
     score = (np.sqrt(left) + np.sqrt(right) - np.sqrt(inside)) * np.exp(-outside / half)

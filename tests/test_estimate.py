@@ -65,47 +65,6 @@ def test_a_neighbours_lane_is_not_the_robots():
     assert abs(est.offset) < 0.01 and list(fit.sides[len(own):]) == [0] * 7
 
 
-def straight_piece(colour, x, y, phi_deg, length):
-    """A straight piece of tape centred at (x, y) [m], running phi_deg from the robot's heading."""
-    t, phi = np.linspace(-length / 2, length / 2, 20), math.radians(phi_deg)
-    return Piece(x + t * math.cos(phi), y + t * math.sin(phi), phi, colour, length, 0.03)
-
-
-# the pieces of gym-duckietown's first frame at TTIC_large_loop seed 3 with domain rand (colour,
-# centre x, y [m], direction [deg], length [m]): set down where a tight right corner begins,
-# the robot sees the yellow centre line turn across its view 0.3 m ahead, its own white edge
-# out of view, and the far white edge of the road after the corner 0.6 m ahead
-TIGHT_RIGHT_CORNER = [
-    ('white', 0.69, -0.05, -85, 0.22), ('white', 0.66, -0.27, 75, 0.215),
-    ('white', 0.63, -0.46, 84, 0.207), ('white', 0.59, -0.48, 84, 0.191),
-    ('white', 0.55, 0.28, -40, 0.149), ('white', 0.68, 0.13, -88, 0.117),
-    ('white', 0.43, 0.33, -28, 0.109), ('white', 0.64, 0.22, -69, 0.107),
-    ('yellow', 0.28, 0.03, -46, 0.075), ('yellow', 0.32, -0.06, -89, 0.067),
-    ('yellow', 0.30, -0.21, 82, 0.063), ('yellow', 0.19, 0.09, -21, 0.054),
-    ('yellow', 0.31, -0.14, 76, 0.045)]
-
-
-def test_a_lane_with_its_left_lines_colour_on_its_right_half_is_not_the_lane():
-    """Yellow is only the left line's: a lane with yellow tape past its centre, towards its
-    right line or just beyond it, has tape where only floor can be. At the corner above a
-    gentle bend with two yellow dashes on its left and the far white edge on its right explained
-    more line than the corner with all five dashes (-0.8 /m, where the corner bends about -5),
-    and the robot, asked to turn too little, left its lane at 2.4 s."""
-    pieces = [straight_piece(*row) for row in TIGHT_RIGHT_CORNER]
-    est, fit = measure(pieces, DT, P, anchor=(0.0, 0.0))  # the start belief's anchor
-    assert est.curvature < -4.0 and abs(est.offset) < 0.05 and abs(est.heading) < 0.1
-    assert list(fit.sides) == [0] * 8 + [1] * 5  # the five yellow dashes its left line
-    # a stray yellow scrap on a straight lane's right half, or just beyond its white edge,
-    # counts against every lane there alike: the lane is still the lane
-    half = DT.lane_width / 2
-    lane = line_pieces(half, 'yellow', dashed=True) + line_pieces(-half, 'white')
-    for y in (-0.5 * half, -1.3 * half):
-        scrap = line_pieces(y, 'yellow', along=(0.3, 0.36), step=0.06)
-        est, fit = measure(lane + scrap, DT, P)
-        assert abs(est.offset) < 0.01 and abs(est.heading) < 0.01
-        assert list(fit.sides) == [1] * (len(lane) - 7) + [-1] * 7 + [0]
-
-
 def test_no_line_or_a_scrap_is_no_lane():
     assert measure([], DT, P) == (None, None)
     scrap = line_pieces(0.05, 'white', along=(0.5, 0.52), step=0.03)
