@@ -235,6 +235,13 @@ class ImprovedParams:
     lateral_gain: float = setting(3.0, 'alpha: weight of the look-ahead offset against its '
                                   'direction (1 = pure pursuit; lanelib/steering.py)', '',
                                   positive)
+    direction: str = setting('angle', "how the steering law reads the centre line's direction "
+                             "at the point it steers at: 'slope' (dy/dx, exact for a parabola; "
+                             'where that point lies nearly as far round a bend as its radius, '
+                             'the slope grows without bound and turns the robot against the '
+                             "bend) or 'angle' (its angle, atan(dy/dx): the same on gentle "
+                             'lanes, bounded on tight bends; lanelib/steering.py)',
+                             choices=('slope', 'angle'))
     omega_max: float = setting(1.5, 'turn rate limit', 'rad/s', positive)
     latency: float = setting(0.0, 'steer on the lane where it will be when the command acts: '
                              'the estimate and the memory moved on by the last command for '

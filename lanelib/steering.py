@@ -18,13 +18,21 @@ episodes of its simulator (with this law, 0 of 4): the estimate of a bend seen b
 straighter than the bend, and this law's over-steer on bends is what makes up for it.
 
 Its limit: both terms are 1/R only to first order in x / R. Where the point lies far round a
-bend (x near R or beyond, a Duckietown inner lane's 0.18 m corner seen 0.37 m ahead), the
-slope there is mostly the bend's, and weighed by 1 - alpha it can turn the robot against the
-bend: on a real Duckietown frame (316closed_0082) the point is straight ahead with the line there
-turned 19 degrees left, and the command turns right. Written from the robot's offset and
-heading to the lane where it is, with the curvature fed forward, the law is exact on any bend,
-but measured so it ran wide on the outer lane's corners, for the reason above
-(docs/benchmarks.md, thirteenth session).
+bend (x near R: the Kobuki's 0.55 m on a bend of 0.6 to 0.75 m), the slope there grows without
+bound, and weighed by 1 - alpha it turns the robot against the bend: on a circle, at 0.7 of
+the bend's curvature at x = 0.7 R, 0.4 of it at 0.8 R, against the bend from x = 0.87 R.
+So by default (`direction` 'angle') the law reads the line's direction as its angle,
+atan(slope): the same to first order, on a circle 1/R + 0.42 x^2 / R^3 (a little over-steer,
+where the slope gives 1/R - 0.25 x^2 / R^3), and never against the bend for x up to R. On the
+Kobuki's S-bends drawn after tuning, started four ways a little off the centre line, it
+completed 61 of 80 runs against 50 (docs/benchmarks.md, sixty-second session). The Duckiebot
+preset keeps the slope ('slope'): with the angle, gym-duckietown's loop_empty left the road,
+the law over-steering in corners a tile tight. There the point often lies beyond the bend's
+radius (an inner lane's 0.18 m corner seen 0.37 m ahead), and on a real Duckietown frame
+(316closed_0082: the point straight ahead, the line there turned 19 degrees left) the slope
+turns the robot right. Written from the robot's offset and heading to the lane where it is,
+with the curvature fed forward, the law is exact on any bend, but measured so it ran wide on
+the outer lane's corners, for the reason above (docs/benchmarks.md, thirteenth session).
 
 Speed: v_max, divided by (1 + curve_slowdown |k_cmd|) on bends (with slow_ahead, the sharper of
 |k_cmd| and the lane's sharpest bend ahead: on the inside of a corner's entry re-centring cancels
@@ -33,15 +41,18 @@ the bend in k_cmd, and the robot came to the corner at full speed), times
 unsure), never below v_min; angular.z = v k_cmd within omega_max.
 """
 
+import math
+
 import numpy as np
 
 
-def curvature(x, y, slope, alpha):
+def curvature(x, y, slope, alpha, angle=False):
     """k_cmd [1/m] towards the point (x, y) [m] where the centre line has `slope` (module doc);
-    0 for a point not ahead."""
+    with `angle`, the slope's angle atan(slope) in its place; 0 for a point not ahead."""
     if x <= 1e-9:
         return 0.0
-    return alpha * 2.0 * y / (x * x) + (1.0 - alpha) * slope / x
+    direction = math.atan(slope) if angle else slope
+    return alpha * 2.0 * y / (x * x) + (1.0 - alpha) * direction / x
 
 
 def command(k_cmd, confidence, p, bend=0.0):
@@ -58,5 +69,5 @@ def command(k_cmd, confidence, p, bend=0.0):
 def steer(x, y, slope, confidence, p, alpha=None, bend=0.0):
     """(linear.x, angular.z) at the point (x, y) of the centre line with `slope` there, the
     law's alpha p.lateral_gain unless given (1: pure pursuit); bend: as in command."""
-    return command(curvature(x, y, slope, p.lateral_gain if alpha is None else alpha),
-                   confidence, p, bend)
+    return command(curvature(x, y, slope, p.lateral_gain if alpha is None else alpha,
+                             p.direction == 'angle'), confidence, p, bend)

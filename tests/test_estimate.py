@@ -773,6 +773,44 @@ def test_on_a_circle_the_law_commands_its_curvature(radius, alpha):
     assert curvature(x, y, slope, alpha) == pytest.approx(1 / radius, rel=0.02)
 
 
+@pytest.mark.parametrize('angle', [False, True])
+@pytest.mark.parametrize('radius', [0.6, -0.75])
+def test_far_round_a_tight_bend_the_slope_turns_against_it_and_its_angle_does_not(radius, angle):
+    """The robot on the centre line of a bend, steering at a point 0.9 of the radius ahead
+    (the Kobuki's 0.55 m on a 0.6 m bend): the slope there, weighed by 1 - alpha, outgrows the
+    offset and the law turns the robot out of the bend; read as an angle it turns into it,
+    harder than the bend (the over-steer that makes up for a bend read straighter than it is)."""
+    x = 0.9 * abs(radius)
+    root = math.copysign(math.sqrt(radius * radius - x * x), radius)
+    y, slope = radius - root, x / root
+    k = curvature(x, y, slope, 3.0, angle=angle)
+    if angle:
+        assert k * radius > 1.0  # into the bend, by more than 1/R
+    else:
+        assert k * radius < 0.0  # out of it
+    # pure pursuit (alpha 1) reads only the point, and turns into the bend either way
+    assert curvature(x, y, slope, 1.0, angle=angle) == curvature(x, y, 0.0, 1.0)
+    assert curvature(x, y, slope, 1.0) * radius > 1.0
+
+
+@pytest.mark.parametrize('angle', [False, True])
+def test_a_gentle_bend_commands_its_curvature_either_way_the_direction_is_read(angle):
+    radius, x = 2.0, 0.2
+    y, slope = radius - math.sqrt(radius * radius - x * x), x / math.sqrt(radius * radius - x * x)
+    assert curvature(x, y, slope, 3.0, angle=angle) == pytest.approx(1 / radius, rel=0.02)
+
+
+def test_steer_reads_the_direction_as_the_settings_say():
+    p = ImprovedParams().in_metres(0.35)
+    assert p.direction == 'angle'  # the Kobuki's
+    for direction, angle in (('angle', True), ('slope', False)):
+        q = replace(p, direction=direction)
+        assert steer(0.5, 0.02, 1.2, 1.0, q) == command(curvature(0.5, 0.02, 1.2, 3.0, angle),
+                                                       1.0, q)
+    assert steer(0.5, 0.02, 1.2, 1.0, p) != steer(0.5, 0.02, 1.2, 1.0,
+                                                  replace(p, direction='slope'))
+
+
 def test_alpha_1_is_pure_pursuit_and_alpha_weighs_the_offset():
     assert curvature(0.8, 0.1, 5.0, 1.0) == pytest.approx(2 * 0.1 / 0.8 ** 2)
     # parallel and 10 cm to the left: alpha 3 turns three times as hard as pure pursuit
