@@ -235,7 +235,7 @@ class ImprovedParams:
     lateral_gain: float = setting(3.0, 'alpha: weight of the look-ahead offset against its '
                                   'direction (1 = pure pursuit; lanelib/steering.py)', '',
                                   positive)
-    direction: str = setting('angle', "how the steering law reads the centre line's direction "
+    direction: str = setting('slope', "how the steering law reads the centre line's direction "
                              "at the point it steers at: 'slope' (dy/dx, exact for a parabola; "
                              'where that point lies nearly as far round a bend as its radius, '
                              'the slope grows without bound and turns the robot against the '

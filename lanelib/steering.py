@@ -21,18 +21,20 @@ Its limit: both terms are 1/R only to first order in x / R. Where the point lies
 bend (x near R: the Kobuki's 0.55 m on a bend of 0.6 to 0.75 m), the slope there grows without
 bound, and weighed by 1 - alpha it turns the robot against the bend: on a circle, at 0.7 of
 the bend's curvature at x = 0.7 R, 0.4 of it at 0.8 R, against the bend from x = 0.87 R.
-So by default (`direction` 'angle') the law reads the line's direction as its angle,
-atan(slope): the same to first order, on a circle 1/R + 0.42 x^2 / R^3 (a little over-steer,
-where the slope gives 1/R - 0.25 x^2 / R^3), and never against the bend for x up to R. On the
-Kobuki's S-bends drawn after tuning, started four ways a little off the centre line, it
-completed 61 of 80 runs against 50 (docs/benchmarks.md, sixty-second session). The Duckiebot
-preset keeps the slope ('slope'): with the angle, gym-duckietown's loop_empty left the road,
-the law over-steering in corners a tile tight. There the point often lies beyond the bend's
-radius (an inner lane's 0.18 m corner seen 0.37 m ahead), and on a real Duckietown frame
-(316closed_0082: the point straight ahead, the line there turned 19 degrees left) the slope
-turns the robot right. Written from the robot's offset and heading to the lane where it is,
-with the curvature fed forward, the law is exact on any bend, but measured so it ran wide on
-the outer lane's corners, for the reason above (docs/benchmarks.md, thirteenth session).
+With `direction` 'angle' the law reads the line's direction as its angle, atan(slope): the
+same to first order, on a circle 1/R + 0.42 x^2 / R^3 (the slope: 1/R - 0.25 x^2 / R^3), and
+never against the bend for x up to R. An option, not the default (docs/benchmarks.md,
+sixty-second session): on the Kobuki's S-bends drawn after tuning, started four ways a little
+off the centre line, it completed 61 of 80 runs against 50; but its over-steer on a steady bend
+cuts inside it: in `simulate.py --benchmark` the wood world's `tight` ran at RMS 3.1 cm, over
+the 3 cm target, the lecture webcam's hairpin at 9.3 cm against 8.0, and in gym-duckietown's
+corners a tile tight the Duckiebot left the road on loop_empty. There the point often lies
+beyond the bend's radius (an inner lane's 0.18 m corner seen 0.37 m ahead), and on a real
+Duckietown frame (316closed_0082: the point straight ahead, the line there turned 19 degrees
+left) the slope turns the robot right. Written from the robot's offset and heading to the lane
+where it is, with the curvature fed forward, the law is exact on any bend, but measured so it
+ran wide on the outer lane's corners, for the reason above (docs/benchmarks.md, thirteenth
+session).
 
 Speed: v_max, divided by (1 + curve_slowdown |k_cmd|) on bends (with slow_ahead, the sharper of
 |k_cmd| and the lane's sharpest bend ahead: on the inside of a corner's entry re-centring cancels

@@ -802,13 +802,13 @@ def test_a_gentle_bend_commands_its_curvature_either_way_the_direction_is_read(a
 
 def test_steer_reads_the_direction_as_the_settings_say():
     p = ImprovedParams().in_metres(0.35)
-    assert p.direction == 'angle'  # the Kobuki's
+    assert p.direction == 'slope'  # the default; 'angle' on request
     for direction, angle in (('angle', True), ('slope', False)):
         q = replace(p, direction=direction)
         assert steer(0.5, 0.02, 1.2, 1.0, q) == command(curvature(0.5, 0.02, 1.2, 3.0, angle),
                                                        1.0, q)
     assert steer(0.5, 0.02, 1.2, 1.0, p) != steer(0.5, 0.02, 1.2, 1.0,
-                                                  replace(p, direction='slope'))
+                                                  replace(p, direction='angle'))
 
 
 def test_alpha_1_is_pure_pursuit_and_alpha_weighs_the_offset():
