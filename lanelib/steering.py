@@ -27,7 +27,7 @@ never against the bend for x up to R. An option, not the default (docs/benchmark
 sixty-second session): on the Kobuki's S-bends drawn after tuning, started four ways a little
 off the centre line, it completed 61 of 80 runs against 50; but its over-steer on a steady bend
 cuts inside it: in `simulate.py --benchmark` the wood world's `tight` ran at RMS 3.1 cm, over
-the 3 cm target, the lecture webcam's hairpin at 9.3 cm against 8.0, and in gym-duckietown's
+the 3 cm target, the lecture webcam's hairpin at 9.3 cm against at most 8.1, and in gym-duckietown's
 corners a tile tight the Duckiebot left the road on loop_empty. There the point often lies
 beyond the bend's radius (an inner lane's 0.18 m corner seen 0.37 m ahead), and on a real
 Duckietown frame (316closed_0082: the point straight ahead, the line there turned 19 degrees
