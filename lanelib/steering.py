@@ -36,6 +36,14 @@ where it is, with the curvature fed forward, the law is exact on any bend, but m
 ran wide on the outer lane's corners, for the reason above (docs/benchmarks.md, thirteenth
 session).
 
+A second limit: a bend that begins between the robot and the point. On a lane straight to s0
+and bent beyond it (y = c (x - s0)^2), the law gives 2 c u (alpha u + 1 - alpha), u = (x - s0) /
+x: with alpha 3, against the bend wherever it begins beyond a third of the way to the point.
+Read instead as if the lane bent evenly from the robot to the point (pure pursuit plus PD on
+the robot's own offset and heading), the law turned more real frames' first commands the
+labelled way, but completed fewer of the Kobuki's S-bends and drove Duckietown's corners less
+tightly: not kept (docs/benchmarks.md, sixty-third session).
+
 Speed: v_max, divided by (1 + curve_slowdown |k_cmd|) on bends (with slow_ahead, the sharper of
 |k_cmd| and the lane's sharpest bend ahead: on the inside of a corner's entry re-centring cancels
 the bend in k_cmd, and the robot came to the corner at full speed), times

@@ -795,6 +795,21 @@ def test_far_round_a_tight_bend_the_slope_turns_against_it_and_its_angle_does_no
     assert curvature(x, y, slope, 1.0) * radius > 1.0
 
 
+@pytest.mark.parametrize('alpha', [1.0, 3.0])
+@pytest.mark.parametrize('c', [1.5, -2.0])
+def test_a_bend_beginning_before_the_point_turns_the_robot_against_it_past_a_third(c, alpha):
+    """The robot on the centre line of a straight that bends (y = c (x - s0)^2) s0 ahead: the
+    law gives 2 c u (alpha u + 1 - alpha), u = (x - s0) / x; with alpha 3 it turns the robot
+    against the bend wherever the bend begins beyond a third of the way to the point (the
+    module doc's second limit); pure pursuit turns into it wherever it begins."""
+    x = 0.45
+    for s0 in (0.05, 0.1, 0.2, 0.3, 0.4):
+        u = (x - s0) / x
+        k = curvature(x, c * (x - s0) ** 2, 2 * c * (x - s0), alpha)
+        assert k == pytest.approx(2 * c * u * (alpha * u + 1 - alpha))
+        assert (k * c > 0) == (alpha == 1.0 or s0 < x / 3)
+
+
 def test_steer_reads_the_direction_as_the_settings_say():
     p = ImprovedParams().in_metres(0.35)
     assert p.direction == 'slope'  # the default; 'angle' on request
