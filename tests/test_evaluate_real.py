@@ -73,6 +73,36 @@ def test_the_node_with_the_preset_reads_rendered_bends(labelled, tmp_path, capsy
     assert 'straight  1/4 (25%), turn direction 0/2 (0%)' in text
 
 
+def test_a_label_whose_notes_say_doubtful_is_counted_apart(labelled, tmp_path, capsys):
+    """A labels file may mark a label doubtful itself ('doubtful: why' in its notes, as
+    tools/heldout_dtcore_labels.csv does where tools.askew measures the robot askew): the
+    figures are given with and without it, and why is listed."""
+    import shutil
+
+    folder = tmp_path / 'copy'
+    shutil.copytree(labelled, folder)
+    with open(folder / 'labels.csv', newline='') as f:
+        rows = list(csv.DictReader(f))
+    for row in rows:
+        if row['file'] == 'rendered/left.png':
+            row['notes'] = 'by eye; doubtful: the robot stands askew'
+    with open(folder / 'labels.csv', 'w', newline='') as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    out = tmp_path / 'r.json'
+    assert evaluate_real.main([str(folder), '--robot', 'rendered=duckiebot', '--json',
+                               str(out)]) == 0
+    doubt = {r['file']: r['doubtful'] for r in json.loads(out.read_text())['results']}
+    assert doubt['rendered/left.png'] == 'the robot stands askew'
+    assert [v for k, v in doubt.items() if k != 'rendered/left.png'] == [None] * 3
+    text = capsys.readouterr().out
+    assert 'without the 1 doubtful labels' in text
+    assert 'rendered/left.png (left): the robot stands askew' in text
+    assert evaluate_real.noted_doubt({'notes': 'labelled by eye'}) is None
+    assert evaluate_real.noted_doubt({'notes': 'doubtful:'}) == 'doubtful'
+
+
 def test_the_command_is_counted_by_the_way_it_turns_apart_from_the_word():
     """A bend decided 'left' whose command turns right (a robot left of its lane's centre
     before a left bend re-centres first) counts for the word, not for the command."""

@@ -20,7 +20,7 @@ controller how many its command itself turned that way ('command turned': the si
 angular.z; the decision word reads where the lane lies at the look-ahead, the command is what the
 robot does first, and the two can differ: a robot left of its lane's centre before a left bend
 turns right first); with and without the labels judged doubtful from the pictures (DOUBTFUL
-below, with why).
+below, with why, or a label whose notes say 'doubtful: why').
 
 The presets (--robot SOURCE=PRESET, repeatable, overrides these; a source is a label's first
 folder, and its name's start is enough):
@@ -79,6 +79,12 @@ DOUBTFUL = {  # label: why it is judged doubtful, from the picture
         'degrees right of the image centre: the robot stands askew, its lane at the look-ahead '
         'lies more than half a lane to the right, and a lane follower turns right to line up',
 }
+
+
+def noted_doubt(row):
+    """Why a label is doubtful, where its own notes say so ('doubtful: why'), else None."""
+    _, mark, why = (row.get('notes') or '').partition('doubtful:')
+    return (why.strip() or 'doubtful') if mark else None
 
 
 def source_of(relpath):
@@ -189,7 +195,8 @@ def evaluate(folder, presets, pictures=None):
                         pictures, row['file'].replace('/', '__') + '.png'))
         results.append(dict(file=row['file'], source=source_of(row['file']),
                             expected=expected, confidence=row['confidence'],
-                            scene=row['scene'], doubtful=DOUBTFUL.get(row['file']),
+                            scene=row['scene'],
+                            doubtful=DOUBTFUL.get(row['file']) or noted_doubt(row),
                             flags=' '.join(flags),
                             lecture=votes['lecture'].most_common(1)[0][0],
                             improved=votes['improved'].most_common(1)[0][0],
