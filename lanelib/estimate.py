@@ -48,6 +48,7 @@ class LaneEstimate:
     width: float = None  # [m] between the lines, as measured
     bend: tuple = None  # (s0 [m], k2 [1/m]): from s0 along it the lane bends k2 (lanefit)
     spread: float = 0.0  # the width's change per metre ahead, as measured (lanefit._halves)
+    seen: float = 0.0  # [m] ahead, the farthest of the points the fit rests on (0: none)
 
     @property
     def offset(self):  # robot left of the lane centre [m]
@@ -82,6 +83,14 @@ class LaneEstimate:
     def lateral_at(self, distance):
         """How far to the left [m] the centre line lies `distance` metres from the robot."""
         return self.point_at(distance)[1]
+
+    def bent_away(self, distance):
+        """How far to the left [m] the centre line, `distance` metres from the robot, has bent
+        away from the straight line it starts along at the robot: of lateral_at, the part that
+        is the lane's own bending, not the robot's offset or heading."""
+        x, y, _ = self.point_at(distance)
+        psi = math.atan(self.b)
+        return (y - self.a) * math.cos(psi) - x * math.sin(psi)
 
 
 def half_curvature(k, b):
@@ -120,7 +129,7 @@ def measure(pieces, profile, p, prior=None, anchor=None, prior_first=False, widt
     return LaneEstimate(fit.e, b, half_curvature(fit.k, b), confidence,
                         int(np.sum(fit.sides == 1)), int(np.sum(fit.sides == -1)),
                         float(np.average(cx, weights=cw)), fit.centre, fit.width, fit.bend,
-                        fit.spread), fit
+                        fit.spread, float(np.max(cx))), fit
 
 
 def near_seen(pieces, sides, distance):
@@ -160,7 +169,7 @@ def predict(est, ds, dtheta):
             k, bend = bend[1], None
     b = math.tan(heading)
     return replace(est, a=-(x - ds) * sin + y * cos, b=b, c=half_curvature(k, b),
-                   confidence=est.confidence * FORGET, bend=bend)
+                   confidence=est.confidence * FORGET, bend=bend, seen=max(0.0, est.seen - s))
 
 
 def follows(pred, meas, gate, shift=0.0):
@@ -201,4 +210,4 @@ def blend(pred, meas, weight):
     return LaneEstimate(towards(e0, e1), b, half_curvature(k, b),
                         towards(pred.confidence, meas.confidence),
                         meas.left, meas.right, meas.reach, width=meas.width, bend=bend,
-                        spread=meas.spread)
+                        spread=meas.spread, seen=meas.seen)

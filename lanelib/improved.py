@@ -683,11 +683,15 @@ class ImprovedController:
         return STOP
 
     def decision(self):
-        """'left' or 'right' when the lane's centre lies more than turn_offset lane widths to
-        that side at the look-ahead distance (going straight, the robot would be out of its
-        lane there), else 'straight'."""
-        p = self.p
-        y, turn = self.estimate.lateral_at(p.lookahead), p.turn_offset * p.lane_width
+        """'left' or 'right' when, going straight, the robot would leave its lane to that side:
+        the lane's centre lies more than turn_offset lane widths that side at the look-ahead
+        distance, or, seen beyond it (up to the floor band's far end), the lane bends that far
+        away from the line it starts along at the robot (a bend ahead: estimate.bent_away);
+        else 'straight'."""
+        e, p = self.estimate, self.p
+        y, turn = e.lateral_at(p.lookahead), p.turn_offset * p.lane_width
+        if abs(y) <= turn and e.seen > p.lookahead:
+            y = e.bent_away(min(e.seen, p.roi_far))
         return 'left' if y > turn else 'right' if y < -turn else 'straight'
 
     def draw(self, detection, command, lane_params=None):
@@ -707,11 +711,11 @@ class ImprovedController:
                       turn_gain=None if self.turning is None else round(self.turning.gain, 3))
         if e is None:
             return dict(offset_m=None, heading_rad=None, curvature=None, confidence=0.0,
-                        bend_m=None, bend_curvature=None, lane_width_m=None, lane_lost_s=None,
-                        **always)
+                        bend_m=None, bend_curvature=None, seen_m=None, lane_width_m=None,
+                        lane_lost_s=None, **always)
         width = None if e.width is None or self.lost_for > 0 else round(e.width, 4)
         bend = (None, None) if e.bend is None else (round(e.bend[0], 4), round(e.bend[1], 4))
         return dict(offset_m=round(e.offset, 4), heading_rad=round(e.heading, 4),
                     curvature=round(e.curvature, 4), confidence=round(e.confidence, 3),
-                    bend_m=bend[0], bend_curvature=bend[1],
+                    bend_m=bend[0], bend_curvature=bend[1], seen_m=round(e.seen, 4),
                     lane_width_m=width, lane_lost_s=round(min(self.lost_for, 1e6), 3), **always)

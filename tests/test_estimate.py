@@ -1008,3 +1008,52 @@ def test_the_robot_drives_along_the_middle_of_the_floor_between_the_tapes(lane):
                                 confidence=1.0)
     x = ctl.p.lookahead
     assert ctl.seen() == steer(x, slope * x, slope, 1.0, ctl.p)
+
+
+# ---------------------------------------------------------------- the decision word
+
+def test_bent_away_is_the_lanes_own_bending_not_the_robots_offset_or_heading():
+    askew = LaneEstimate(0.03, math.tan(0.3), 0.0, 1.0)  # a straight lane, turned and aside
+    assert abs(askew.lateral_at(0.8)) > 0.2 and askew.bent_away(0.8) == pytest.approx(0.0,
+                                                                                        abs=1e-9)
+    k = 2.0  # an arc from the robot: all of it is bending; at 0.5 m from the robot (a chord
+    # of the circle) it has turned 2 asin(k d / 2)
+    arc = LaneEstimate(0.0, 0.0, k / 2, 1.0)
+    turned = 2 * math.asin(k * 0.5 / 2)
+    assert arc.bent_away(0.5) == pytest.approx((1 - math.cos(turned)) / k, rel=0.02)
+    ahead = LaneEstimate(0.0, 0.0, 0.0, 1.0, bend=(0.5, 3.0))  # straight, then bending left
+    assert ahead.bent_away(0.4) == pytest.approx(0.0, abs=1e-9)
+    assert ahead.bent_away(0.8) == pytest.approx(ahead.lateral_at(0.8)) and (
+        ahead.bent_away(0.8) > 0.1)
+
+
+def test_the_word_turns_for_a_bend_seen_beyond_the_look_ahead_and_not_for_one_unseen():
+    robot = ImprovedController(LaneParams(), ImprovedParams(lane='duckietown', memory=0.0))
+    p = robot.p
+    turn = p.turn_offset * p.lane_width
+    # straight to just short of the look-ahead, then bending left: at the look-ahead the lane
+    # has hardly left the robot's path, by the floor band's far end it has
+    bend = (p.lookahead - 0.05, 4.0)
+    lane = LaneEstimate(0.0, 0.0, 0.0, 1.0, bend=bend, seen=p.roi_far)
+    assert abs(lane.lateral_at(p.lookahead)) < turn < lane.bent_away(p.roi_far)
+    robot.estimate = lane
+    assert robot.decision() == 'left'
+    robot.estimate = replace(lane, bend=(bend[0], -4.0))
+    assert robot.decision() == 'right'
+    robot.estimate = replace(lane, seen=p.lookahead)  # the lines end at the look-ahead
+    assert robot.decision() == 'straight'
+    # a straight lane seen far, the robot turned off it: the look-ahead's reading stands
+    robot.estimate = LaneEstimate(0.0, math.tan(0.05), 0.0, 1.0, seen=p.roi_far)
+    assert robot.decision() == 'straight'
+    robot.estimate = LaneEstimate(0.0, math.tan(-0.4), 0.0, 1.0, seen=p.roi_far)
+    assert robot.decision() == 'right'
+
+
+def test_the_estimate_says_how_far_ahead_its_lines_are_seen_and_keeps_it_moving():
+    half = DT.lane_width / 2
+    pieces = line_pieces(half, 'yellow', along=(0.15, 0.6)) + line_pieces(-half, 'white',
+                                                                          along=(0.15, 0.6))
+    est, _ = measure(pieces, DT, P)
+    assert est.seen == pytest.approx(0.65, abs=0.01)  # the last piece runs 0.55 to 0.65
+    assert predict(est, 0.1, 0.0).seen == pytest.approx(est.seen - 0.1, abs=1e-3)
+    assert blend(predict(est, 0.1, 0.0), est, 0.5).seen == est.seen  # the measurement's
