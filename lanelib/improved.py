@@ -267,7 +267,9 @@ class ImprovedParams:
     turn_offset: float = setting(0.5, "the decision recorded: 'left' or 'right' when the lane's "
                                  'centre lies more than this many lane widths to that side at '
                                  'the look-ahead distance (going straight, the robot would be '
-                                 "out of its lane there), 'straight' otherwise", 'lane widths',
+                                 'out of its lane there), or the lane seen beyond it bends that '
+                                 "far away from the line it starts along; 'straight' otherwise",
+                                 'lane widths',
                                  positive)
 
     # the settings given in lane widths (and lane widths per second): the Kobuki's numbers
