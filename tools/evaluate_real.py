@@ -8,7 +8,8 @@ from other pictures), with the flags a user types for the picture's robot, and n
 
     improved   --controller improved --robot PRESET: the preset of the source's robot (below);
                its decision word: left or right when the lane's centre lies more than half a
-               lane width to that side at its look-ahead, straight otherwise, none with no lane
+               lane width to that side at its look-ahead, or the lane seen beyond it bends that
+               far from the line it starts along, straight otherwise, none with no lane
     lecture    the lecture's rule with --calibration none (the lecture's camera matrix is the
                lecture's webcam's, not these)
     straight   always 'straight', the baseline any controller has to beat
@@ -17,8 +18,8 @@ A label 'no_lane' expects 'none'. A video counts once, by the decision most of i
 Figures are printed per source and in all: agreement with the labels, and on the frames labelled
 left or right, how many were decided that way ('turn direction'), and for the improved
 controller how many its command itself turned that way ('command turned': the sign of its
-angular.z; the decision word reads where the lane lies at the look-ahead, the command is what the
-robot does first, and the two can differ: a robot left of its lane's centre before a left bend
+angular.z; the decision word reads where the lane lies ahead, the command is what the robot
+does first, and the two can differ: a robot left of its lane's centre before a left bend
 turns right first); with and without the labels judged doubtful from the pictures (DOUBTFUL
 below, with why, or a label whose notes say 'doubtful: why').
 
