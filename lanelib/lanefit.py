@@ -606,17 +606,21 @@ def _fit_bend(points, on, lane, lane_width, priors, limits):
         low.append(-limits[2])
         high.append(limits[2])
     low, high = np.array(low), np.array(high)
+    eye = np.eye(n)
     for _ in range(3 * ITERATIONS):
         wj = jac.transpose(0, 2, 1) * w
         normal = wj @ jac + pulled
-        scaled = normal + damping[:, None, None] * (normal * np.eye(n))
+        scaled = normal + damping[:, None, None] * (normal * eye)
         gradient = (wj @ r[..., None])[..., 0] + pull * (q - target)
         trial = q - np.linalg.solve(scaled, gradient[..., None])[..., 0]
         trial[:, 1:] = np.minimum(np.maximum(trial[:, 1:], low), high)  # np.clip's values
         c_trial, r_trial, j_trial = evaluated(trial)
-        better = c_trial < c
-        q[better], c[better], r[better] = trial[better], c_trial[better], r_trial[better]
-        jac[better, :, :5] = j_trial[better]
+        better = c_trial < c  # kept where better: one call each, no copies of the rows
+        column = better[:, None]
+        np.copyto(q, trial, where=column)
+        np.copyto(c, c_trial, where=better)
+        np.copyto(r, r_trial, where=column)
+        np.copyto(jac[:, :, :5], j_trial, where=column[:, None])
         damping = np.where(better, damping / 3, damping * 10)
     best = int(np.argmin(c))  # the best start's fit (the first of equals, as before)
     q, c_best = q[best], float(r[best] ** 2 @ w)
