@@ -50,6 +50,11 @@ BEND_STARTS = (0.25, 0.5, 0.75)
 BEND_GAIN = 0.5
 BEND_MIN = 0.1  # [1 / lane width] a smaller change of curvature is no bend
 BEND_FLOOR = 0.01  # [lane widths] one arc as near its points as this (RMS) needs no bend
+# a bend is fitted only where, linearised about the one arc (_bend_gain), it leaves at most
+# this fraction of the one arc's weighted squared distances: every bend kept (which leaves at
+# most BEND_GAIN) had left at most 0.53 so, over 3,192 fits (17 simulated runs, the real
+# frames), and 40 % of the fits that kept none are not made (docs/benchmarks.md, 67th session)
+BEND_SCREEN = 0.7
 # every fit's steps are held within these: a lane turned at most 1.4 rad (80 degrees) at the
 # robot, bending at most 30 /m (a circle 3.3 cm in radius), so that a step on few points stays
 # among lanes a camera could see
@@ -544,7 +549,9 @@ def _fit_bend(points, on, lane, lane_width, priors, limits):
     s0, width) from s0 at BEND_STARTS, each from the one arc and from parabolas through the
     points before and after s0; the one arc's priors, k2 and s0 free; derivatives by
     differences. The starts are fitted side by side in arrays (one evaluation of every start
-    and its steps per iteration): a start at a time took about 10 ms a frame."""
+    and its steps per iteration): a start at a time took about 10 ms a frame. None without
+    fitting where even the bend linearised about the one arc leaves more than BEND_SCREEN of
+    its distances (_bend_gain: one solve, about 0.1 ms against a fit's 3)."""
     x, y, w = points
     w = (on != 0) * w
     own = w > 0  # the lane's own points: the fit needs only these, the last check every one
@@ -567,13 +574,18 @@ def _fit_bend(points, on, lane, lane_width, priors, limits):
         return r ** 2 @ w + (qs - target) ** 2 @ pull, r
 
     halves = _halves(np.asarray(lane, float)[None, :], x)[0]
-    one = float(w @ (_distances(x, y, lane[None, :])[0][0] - on * halves) ** 2)
+    d, arc_jac = _distances(x, y, lane[None, :], jacobian=True)
+    one = float(w @ (d[0] - on * halves) ** 2)
     if one <= w.sum() * (BEND_FLOOR * lane_width) ** 2:
         return None  # the one arc fits: nothing to gain
+    knots = x.min() + np.array(BEND_STARTS) * np.ptp(x)
+    if _bend_gain(x, y, on, w, lane, limits, d[0] - on * halves, arc_jac[0], knots) > (
+            BEND_SCREEN * one):
+        return None  # not even a linearised bend fits much better
     e, psi, k = lane[:3]
     own = list(lane[3:])  # the width (and spread)
     starts = []
-    for s0 in x.min() + np.array(BEND_STARTS) * np.ptp(x):
+    for s0 in knots:
         starts.append([e, psi, k, k, s0, *own])
         near, far = x < s0, x >= s0
         if np.count_nonzero(near) >= 2 * POINTS:  # before s0 a line or a parabola, after
@@ -633,6 +645,31 @@ def _fit_bend(points, on, lane, lane_width, priors, limits):
             abs(robot_offset(*q[:3])) > max(q[5] / 2, abs(robot_offset(*lane[:3])))):
         return None
     return np.delete(q, (3, 4)), (float(q[4]), float(q[3]))
+
+
+def _bend_gain(x, y, on, w, lane, limits, r, slopes, knots):
+    """The least weighted squared distance of the lane's points (x, y, sides `on`, weights w)
+    that the one arc (lane) bent at any of the knots [m ahead] leaves, linearised: the
+    residuals r against the one arc's derivatives (slopes (N, 3): in e, psi and k; and the
+    width's and spread's, where they are free) and a bend's, (s - s0)^2 / 2 at s along the arc
+    past the knot s0. Weighted least squares by the normal equations, every knot in one
+    solve."""
+    columns = [slopes, -on[:, None] / 2]
+    if limits[0] == limits[1]:
+        columns.pop()  # the width held
+    if len(lane) > 4 and limits[2]:
+        columns.append(-on[:, None] * x[:, None] / 2)
+    fixed = np.hstack(columns)  # (N, m - 1): the same at every knot
+    past = np.maximum(_along(x, y, *lane[:3]) - knots[:, None], 0.0)  # (K, N)
+    a = np.empty(past.shape + (fixed.shape[1] + 1,))  # (K, N, m)
+    a[..., :-1] = fixed
+    a[..., -1] = past ** 2 / 2
+    wa = np.swapaxes(a, 1, 2) * w  # (K, m, N)
+    normal, b = wa @ a, (wa @ r)[..., None]
+    # a little ridge: with one line in view the offset and the width move it alike
+    normal += np.eye(normal.shape[1]) * (1e-12 * np.trace(normal, axis1=1, axis2=2))[:, None,
+                                                                                    None]
+    return float(w @ r ** 2 - (b[..., 0] * np.linalg.solve(normal, b)[..., 0]).sum(axis=1).max())
 
 
 def _parabola(x, y, w):

@@ -514,6 +514,61 @@ def test_a_straight_lane_has_no_bend():
     assert est.bend is None
 
 
+@pytest.mark.parametrize('limits', [(0.2, 0.3), (0.25, 0.25), (0.2, 0.3, 0.1)])
+def test_the_linearised_bend_is_the_weighted_least_squares_one(limits):
+    """lanefit._bend_gain: the least weighted squared residual of the one arc's derivatives
+    (the width's and spread's where free) and a bend's (s - s0)^2 / 2 past the best knot, as
+    np.linalg.lstsq solves it knot by knot."""
+    rng = np.random.default_rng(len(limits) + int(limits[0] == limits[1]))
+    lane = np.array([0.02, 0.1, 0.8, 0.25] + ([0.05] if len(limits) > 2 else []))
+    x = rng.uniform(0.15, 0.9, 36)
+    y = 0.1 * x + rng.normal(0, 0.02, 36)
+    on, w = rng.choice([-1.0, 1.0], 36), rng.uniform(0.02, 0.1, 36)
+    d, slopes = lanefit._distances(x, y, lane[None, :], jacobian=True)
+    r = d[0] - on * lanefit._halves(lane[None, :], x)[0]
+    knots = np.array([0.3, 0.5, 0.7])
+    got = lanefit._bend_gain(x, y, on, w, lane, limits, r, slopes[0], knots)
+    columns = [slopes[0]] + ([] if limits[0] == limits[1] else [-on[:, None] / 2]) + (
+        [-on[:, None] * x[:, None] / 2] if len(limits) > 2 else [])
+    s = lanefit._along(x, y, *lane[:3])
+    left = []
+    for s0 in knots:
+        a = np.hstack(columns + [(np.maximum(s - s0, 0.0) ** 2 / 2)[:, None]])
+        a, b = a * np.sqrt(w)[:, None], r * np.sqrt(w)
+        left.append(((a @ np.linalg.lstsq(a, b, rcond=None)[0] - b) ** 2).sum())
+    assert got == pytest.approx(min(left), rel=1e-6, abs=1e-12)
+
+
+def test_the_bend_is_fitted_only_where_a_linearised_bend_fits_much_better(monkeypatch):
+    """A bend seen from its straight passes the screen (BEND_SCREEN) and is fitted; a straight
+    lane whose pieces lie a few millimetres off their line at random (more than BEND_FLOOR)
+    does not: no two-arc evaluation is made for it, and fitted anyway it keeps no bend."""
+    calls = []
+    bent_distances = lanefit._bent_distances
+    monkeypatch.setattr(lanefit, '_bent_distances', lambda *a: calls.append(1) or
+                        bent_distances(*a))
+    bend = path_pieces((-0.01, 0.0, 0.0), (0.35, -5.0), +1, 'yellow')
+    est, _ = measure(bend, DT, P)
+    assert est.bend is not None and calls
+    rng = np.random.default_rng(4)
+    half = DT.lane_width / 2
+    pieces = [Piece(p.x, p.y + rng.normal(0, 0.006), p.phi, p.colour, p.length, p.width)
+              for p in line_pieces(half, 'yellow', dashed=True) + line_pieces(-half, 'white')]
+    _, fit = measure(pieces, DT, P)
+    points = lanefit._points(pieces, 2.6 * DT.lane_width)
+    on = np.repeat(fit.sides, lanefit.POINTS)
+    lane = np.array([fit.e, fit.psi, fit.k, fit.width])
+    d = lanefit._distances(*points[:2], lane[None, :])[0][0] - on * fit.width / 2
+    assert ((on != 0) * points[2] @ d ** 2 / ((on != 0) * points[2]).sum()) ** 0.5 > (
+        lanefit.BEND_FLOOR * DT.lane_width)  # beyond the floor: the screen decides
+    calls.clear()
+    est, _ = measure(pieces, DT, P)
+    assert est.bend is None and not calls
+    monkeypatch.setattr(lanefit, 'BEND_SCREEN', math.inf)
+    est, _ = measure(pieces, DT, P)
+    assert est.bend is None and calls
+
+
 def test_robot_offset_is_the_distance_across_the_arc():
     assert robot_offset(0.2, math.radians(-60), 0.0) == pytest.approx(0.1)
     assert robot_offset(-0.2, math.radians(60), 0.0) == pytest.approx(-0.1)
