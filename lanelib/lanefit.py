@@ -28,7 +28,9 @@ bent the lane.
 Where the lane's curvature changes in view (a bend's entry seen from its straight, an S-bend's
 turn the other way), the lane kept is refitted as two arcs, the second going on from the first
 (a bend: where, and its curvature), when they fit its pieces much better: one arc through the
-robot fits such a lane only turned away from it at the robot.
+robot fits such a lane only turned away from it at the robot. The two arcs are fitted only
+where a bend linearised about the one arc would fit much better too (a solve, against the
+fit's many): on most frames with no bend in view, the fit is not made.
 """
 
 import math
