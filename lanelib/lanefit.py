@@ -577,11 +577,12 @@ def _fit_bend(points, on, lane, lane_width, priors, limits):
 
     halves = _halves(np.asarray(lane, float)[None, :], x)[0]
     d, arc_jac = _distances(x, y, lane[None, :], jacobian=True)
-    one = float(w @ (d[0] - on * halves) ** 2)
+    missed = d[0] - on * halves  # each point's distance from its line
+    one = float(w @ missed ** 2)
     if one <= w.sum() * (BEND_FLOOR * lane_width) ** 2:
         return None  # the one arc fits: nothing to gain
     knots = x.min() + np.array(BEND_STARTS) * np.ptp(x)
-    if _bend_gain(x, y, on, w, lane, limits, d[0] - on * halves, arc_jac[0], knots) > (
+    if one - _bend_gain(x, y, on, w, lane, limits, missed, arc_jac[0], knots) > (
             BEND_SCREEN * one):
         return None  # not even a linearised bend fits much better
     e, psi, k = lane[:3]
@@ -650,12 +651,12 @@ def _fit_bend(points, on, lane, lane_width, priors, limits):
 
 
 def _bend_gain(x, y, on, w, lane, limits, r, slopes, knots):
-    """The least weighted squared distance of the lane's points (x, y, sides `on`, weights w)
-    that the one arc (lane) bent at any of the knots [m ahead] leaves, linearised: the
-    residuals r against the one arc's derivatives (slopes (N, 3): in e, psi and k; and the
-    width's and spread's, where they are free) and a bend's, (s - s0)^2 / 2 at s along the arc
-    past the knot s0. Weighted least squares by the normal equations, every knot in one
-    solve."""
+    """How much of the weighted squared distance of the lane's points (x, y, sides `on`,
+    weights w) from the one arc (lane) bending at one of the knots [m ahead] takes away at
+    best, linearised: the residuals r against the one arc's derivatives (slopes (N, 3): in e,
+    psi and k; and the width's and spread's, where they are free) and a bend's, (s - s0)^2 / 2
+    at s along the arc past the knot s0. Weighted least squares by the normal equations, every
+    knot in one solve."""
     columns = [slopes, -on[:, None] / 2]
     if limits[0] == limits[1]:
         columns.pop()  # the width held
@@ -671,7 +672,7 @@ def _bend_gain(x, y, on, w, lane, limits, r, slopes, knots):
     # a little ridge: with one line in view the offset and the width move it alike
     normal += np.eye(normal.shape[1]) * (1e-12 * np.trace(normal, axis1=1, axis2=2))[:, None,
                                                                                     None]
-    return float(w @ r ** 2 - (b[..., 0] * np.linalg.solve(normal, b)[..., 0]).sum(axis=1).max())
+    return float((b[..., 0] * np.linalg.solve(normal, b)[..., 0]).sum(axis=1).max())
 
 
 def _parabola(x, y, w):

@@ -516,9 +516,9 @@ def test_a_straight_lane_has_no_bend():
 
 @pytest.mark.parametrize('limits', [(0.2, 0.3), (0.25, 0.25), (0.2, 0.3, 0.1)])
 def test_the_linearised_bend_is_the_weighted_least_squares_one(limits):
-    """lanefit._bend_gain: the least weighted squared residual of the one arc's derivatives
-    (the width's and spread's where free) and a bend's (s - s0)^2 / 2 past the best knot, as
-    np.linalg.lstsq solves it knot by knot."""
+    """lanefit._bend_gain: what the one arc's derivatives (the width's and spread's where
+    free) and a bend's (s - s0)^2 / 2 past the best knot take away from the weighted squared
+    residuals, as np.linalg.lstsq solves it knot by knot."""
     rng = np.random.default_rng(len(limits) + int(limits[0] == limits[1]))
     lane = np.array([0.02, 0.1, 0.8, 0.25] + ([0.05] if len(limits) > 2 else []))
     x = rng.uniform(0.15, 0.9, 36)
@@ -536,7 +536,7 @@ def test_the_linearised_bend_is_the_weighted_least_squares_one(limits):
         a = np.hstack(columns + [(np.maximum(s - s0, 0.0) ** 2 / 2)[:, None]])
         a, b = a * np.sqrt(w)[:, None], r * np.sqrt(w)
         left.append(((a @ np.linalg.lstsq(a, b, rcond=None)[0] - b) ** 2).sum())
-    assert got == pytest.approx(min(left), rel=1e-6, abs=1e-12)
+    assert w @ r ** 2 - got == pytest.approx(min(left), rel=1e-6, abs=1e-12)
 
 
 def test_the_bend_is_fitted_only_where_a_linearised_bend_fits_much_better(monkeypatch):
