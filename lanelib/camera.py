@@ -77,15 +77,25 @@ CAMERAS = {'lecture': LECTURE_CAMERA, 'duckiebot': DUCKIEBOT_CAMERA,
                                          np.zeros(5), DUCKIEBOT_CAMERA.image_size)}
 
 
-def undistortion_maps(camera, width, height):
+def undistortion_maps(camera, width, height, source=None):
     """The maps cv2.undistort builds on every call, built once for cv2.remap.
 
     They are the CV_16SC2 fixed-point maps cv2.undistort uses inside, so
     cv2.remap(frame, *maps, cv2.INTER_LINEAR) gives exactly cv2.undistort's result (the
-    lecture's calibration_camera; tests/test_pipeline.py checks it).
+    lecture's calibration_camera; tests/test_pipeline.py checks it). source: the (width,
+    height) of the frames remapped, when it is not the undistorted image's: the maps then read
+    the camera's frames at that size straight into the undistorted image at this one (the
+    camera read out at fewer pixels, with no frame shrunk first).
     """
     cam = camera.scaled_to(width, height)
-    return cv2.initUndistortRectifyMap(cam.matrix, cam.distortion, None, cam.matrix,
+    matrix = cam.matrix
+    if source is not None:
+        # each pixel read where cv2.resize's INTER_AREA centres it, f (x + 1/2) - 1/2 for a
+        # factor f: at a factor 2 between two pixels, so that the linear remap averages them
+        # as the resize does (read at 2 x, every other column, a tape's edge is noisier)
+        matrix = camera.scaled_to(*source).matrix.copy()
+        matrix[:2, 2] += (np.array(source) / (width, height) - 1) / 2
+    return cv2.initUndistortRectifyMap(matrix, cam.distortion, None, cam.matrix,
                                        (width, height), cv2.CV_16SC2)
 
 

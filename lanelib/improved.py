@@ -160,6 +160,13 @@ class ImprovedParams:
                               "pixels at half the width, and a tape still several pixels wide "
                               "at the floor band's far end; 0: as they come", 'px',
                               non_negative)
+    column_binning: int = setting(2, 'frames (as read_width leaves them) are read with this '
+                                  'many columns taken as one, every row kept (binned across by '
+                                  'the undistortion itself, the camera matrix with it; the '
+                                  "pictures stretched back to the frame's width): the rows say "
+                                  'how far ahead the tape lies, and a level camera sees its '
+                                  'floor band in few; half the pixels at 2, a tape still '
+                                  'several pixels wide; 1: every column', 'columns', positive)
     roi_near: float = setting(0.857, 'floor mask starts this far ahead (clipped to the view)',
                               'lane widths', positive)
     roi_far: float = setting(3.43, 'floor mask ends this far ahead', 'lane widths', positive)
@@ -250,9 +257,10 @@ class ImprovedParams:
     memory: float = setting(4.0, "remember the centre line seen this long (moved with the "
                             "robot's motion: odometry, else the commands) and steer on it; "
                             '0: steer on the latest estimate only', 's', non_negative)
-    memory_points: int = setting(0, "with memory: keep at most this many of a frame's centre-line "
-                                 'points, evenly spread and carrying the weight of all (each '
-                                 "fit on the memory costs time in proportion); 0: every one",
+    memory_points: int = setting(200, "with memory: keep at most this many of a frame's "
+                                 'centre-line points (a frame gives about a thousand), evenly '
+                                 'spread and carrying the weight of all (each fit on the memory '
+                                 'costs time in proportion); 0: every one',
                                  'points', non_negative)
     memory_lookahead: float = setting(1.571, 'with memory: steer at the remembered centre line '
                                       'this far ahead', 'lane widths', positive)
@@ -414,11 +422,15 @@ class ImprovedController:
         shrink = 0 < self.p.read_width < w  # the same camera read out at fewer pixels
         if shrink:
             w, h = self.p.read_width, max(1, round(h * self.p.read_width / w))
-        if self.view is None or self.view.key != (id(self.camera), w, h):
-            self.view = FloorView(self.camera, w, h, self.p)
+        # and at fewer columns, every row kept: read so by the undistortion itself
+        source = (w, h) if self.p.column_binning > 1 and w > 1 else None
+        if source:
+            w = max(1, round(w / self.p.column_binning))
+        if self.view is None or self.view.key != (id(self.camera), w, h, source):
+            self.view = FloorView(self.camera, w, h, self.p, source)
         self.mark('start')  # the shrinking is the frame's work, timed with the undistortion
         if shrink:
-            frame = cv2.resize(frame, (w, h), interpolation=cv2.INTER_AREA)
+            frame = cv2.resize(frame, source or (w, h), interpolation=cv2.INTER_AREA)
         return perceive(frame, self.view, self.profile, self.p, self.piece_length, keep_stages,
                         self.mark, self.pitch_error)
 

@@ -27,7 +27,8 @@ def arc_points(estimate, lengths, offset=0.0):
 
 
 def draw_lane(controller, detection, command):
-    """The picture the video, the debug topic and the window show (module doc)."""
+    """The picture the video, the debug topic and the window show (module doc), as wide as
+    the frame read (FloorView.shown)."""
     masks, first = detection.masks
     profile, p, e = controller.profile, controller.p, controller.estimate
     shown = {c: m for c, m in masks.items() if c in profile.colours or c == 'red'}
@@ -42,7 +43,7 @@ def draw_lane(controller, detection, command):
     if e is not None:
         text += (f'  offset {100 * e.offset:+.1f} cm  heading {math.degrees(e.heading):+.1f} '
                  f'deg  curvature {e.curvature:+.2f}/m  confidence {e.confidence:.2f}')
-    return text_band(image, text)
+    return text_band(controller.view.shown(image), text)
 
 
 def stage_pictures(controller, detection, command):
@@ -69,5 +70,8 @@ def stage_pictures(controller, detection, command):
         for a, b in zip(u[ok], v[ok]):
             cv2.circle(picture, (int(a), int(b)), 2, colour, -1)
     out.append(('pieces', "4 tape pieces: the lane's left, right; others grey", picture))
+    # each picture of the image read as wide as the frame (column_binning: stretched back)
+    out = [(key, title, view.shown(picture) if key != 'raw' else picture)
+           for key, title, picture in out]
     out.append(('lane', '5 the lane, the decision', draw_lane(controller, detection, command)))
     return out

@@ -47,15 +47,20 @@ class FloorView:
     lanelib.camera.Camera, or None (frames as they come, taken as the lecture camera's
     geometry scaled to them); p: ImprovedParams in metres."""
 
-    def __init__(self, camera, width, height, p):
-        self.key = (id(camera), width, height)
+    def __init__(self, camera, width, height, p, source=None):
+        self.key = (id(camera), width, height, source)
         self.camera = camera
         self.matrix = (camera or LECTURE_CAMERA).scaled_to(width, height).matrix
         self.mask = floor_band(width, height, self.matrix, p.mounting, p.roi_near, p.roi_far,
                                camera)
         rows = np.flatnonzero(self.mask.any(axis=1))
         self.first, self.last = (int(rows[0]), int(rows[-1]) + 1) if rows.size else (0, 0)
-        self.maps = undistortion_maps(camera, width, height) if camera is not None else None
+        # source: the size of the frames this view reads, when it is not (width, height): the
+        # undistortion reads them at this size (p.column_binning), or a frame as it comes is
+        # shrunk to it
+        self.source = source
+        self.maps = (undistortion_maps(camera, width, height, source) if camera is not None
+                     else None)
         self.floor = self.mask[self.first:self.last]
         self.sides = self.surroundings = None  # no floor in view: the whole frame is read
         if self.last > self.first:
@@ -64,15 +69,31 @@ class FloorView:
 
     def undistort(self, raw):
         """The whole undistorted frame."""
-        return raw if self.maps is None else cv2.remap(raw, *self.maps, cv2.INTER_LINEAR)
+        if self.maps is None:
+            return self._as_read(raw)
+        return cv2.remap(raw, *self.maps, cv2.INTER_LINEAR)
 
     def band(self, raw):
         """The band's rows of the undistorted frame, exactly as in the whole one."""
         if self.maps is None:
-            return raw[self.first:self.last]
+            return self._as_read(raw)[self.first:self.last]
         m1, m2 = self.maps
         return cv2.remap(raw, m1[self.first:self.last], m2[self.first:self.last],
                          cv2.INTER_LINEAR)
+
+    def shown(self, picture):
+        """A picture of the image read, as wide as the frame it was read from (binned columns
+        stretched back), so that it has the camera's shape."""
+        if self.source is None or picture.shape[1] == self.source[0]:
+            return picture
+        return cv2.resize(picture, (self.source[0], picture.shape[0]),
+                          interpolation=cv2.INTER_LINEAR)
+
+    def _as_read(self, raw):
+        """A frame with no calibration, at the size this view reads (INTER_AREA)."""
+        if self.source is None:
+            return raw
+        return cv2.resize(raw, self.mask.shape[::-1], interpolation=cv2.INTER_AREA)
 
 
 def perceive(frame, view, profile, p, piece_length, keep_stages=False, mark=None, pitch=0.0):

@@ -184,7 +184,7 @@ def test_a_frame_read_at_half_its_width_gives_the_same_lane():
             controller = make_controller('improved', params, camera,
                                          replace(improved, read_width=width))
             controller(controller.perceive(frame))
-            lanes[width] = controller.estimate, controller.view.key[1:]  # the size read
+            lanes[width] = controller.estimate, controller.view.key[1:3]  # the size read
         (whole, seen), (half, shrunk), (same, as_is) = lanes[0], lanes[320], lanes[1000]
         assert (seen, shrunk, as_is) == ((640, 480), (320, 240), (640, 480))
         assert half.offset == pytest.approx(whole.offset, abs=0.005)
@@ -192,3 +192,75 @@ def test_a_frame_read_at_half_its_width_gives_the_same_lane():
         assert half.curvature == pytest.approx(whole.curvature, abs=0.1)
         assert (same.offset, same.heading) == (whole.offset, whole.heading)
         assert whole.offset == pytest.approx(offset, abs=0.02)  # the pose rendered
+
+
+def test_maps_that_read_two_columns_as_one_average_them_as_inter_area_does():
+    # column_binning 2 undistorts a 640 x 480 frame straight into 320 x 480 (no shrunk copy
+    # made): each pixel read half way between two columns, which the linear remap averages,
+    # as cv2.resize's INTER_AREA does; read at 2 x, every other column, it would not be
+    from lanelib.camera import Camera
+    plain = Camera('plain', LECTURE_CAMERA.matrix, np.zeros(5), (640, 480))  # no distortion
+    stripes = np.zeros((480, 640, 3), np.uint8)
+    stripes[:, ::2] = 200  # every other column lit: binned, every pixel 100
+    rng = np.random.default_rng(0)
+    noisy = rng.integers(0, 256, (480, 640, 3), dtype=np.uint8)
+    maps = undistortion_maps(plain, 320, 480, source=(640, 480))
+    for frame in (stripes, noisy):
+        read = cv2.remap(frame, *maps, cv2.INTER_LINEAR)
+        area = cv2.resize(frame, (320, 480), interpolation=cv2.INTER_AREA)
+        assert read.shape == area.shape
+        assert np.abs(read[:, :-1].astype(int) - area[:, :-1]).max() <= 1  # rounding
+    assert np.all(cv2.remap(stripes, *maps, cv2.INTER_LINEAR)[:, :-1] == 100)
+    # with the lecture camera's distortion, close to a shrunk frame undistorted
+    frame = simulator_frames(1, seed=4)[0]
+    read = cv2.remap(frame, *undistortion_maps(LECTURE_CAMERA, 320, 480, source=(640, 480)),
+                     cv2.INTER_LINEAR)
+    shrunk = cv2.remap(cv2.resize(frame, (320, 480), interpolation=cv2.INTER_AREA),
+                       *undistortion_maps(LECTURE_CAMERA, 320, 480), cv2.INTER_LINEAR)
+    assert np.mean(np.abs(read.astype(int) - shrunk)) < 2
+
+
+def test_the_improved_controller_reads_two_columns_as_one_and_finds_the_same_lane():
+    # the default column_binning 2: the lecture world's 640 x 480 frames read at 320 x 480,
+    # every row kept, the camera matrix's columns halved: on its straights (a single frame
+    # of a bend is the search's to guess) the lane where it was rendered, as with every
+    # column; with no calibration the frame is shrunk so; the picture is drawn at the size
+    # read
+    import math
+    from dataclasses import replace
+
+    from lanelib.camera import CAMERAS
+    from lanelib.sim.tracks import load_track, with_world
+    from lanelib.sim.world import WORLDS, FloorCamera, FloorMap
+    from simulate import improved_params
+
+    spec = with_world(load_track('lecture'), WORLDS['lecture'])
+    improved = improved_params(spec)
+    assert improved.column_binning == 2 and ImprovedParams().column_binning == 2
+    camera = CAMERAS[spec.camera]
+    view = FloorCamera(camera, spec.mounting)
+    floor = FloorMap(spec.track, spec.gaps, spec.dashes)
+    rng = np.random.default_rng(1)
+    for s, offset, yaw in [(0.0, 0.03, 5.0), (0.5, -0.03, -6.0), (6.0, 0.0, 0.0)]:
+        frame = view.render(floor, spec.track.pose_at(s, offset, math.radians(yaw)),
+                            spec.scene, rng)
+        sizes = {}
+        for binning in (1, 2):
+            controller = make_controller('improved', LaneParams(), camera,
+                                         replace(improved, column_binning=binning))
+            controller(controller.perceive(frame))
+            sizes[binning] = controller.view.key[1:]
+            estimate = controller.estimate
+            assert estimate.offset == pytest.approx(offset, abs=0.015)  # the pose rendered
+            assert math.degrees(estimate.heading) == pytest.approx(yaw, abs=1.5)
+        assert sizes == {1: (640, 480, None), 2: (320, 480, (640, 480))}
+    detection = controller.perceive(frame, keep_stages=True)
+    assert detection.image.shape[:2] == (480, 320)
+    command = controller(detection)
+    for _, _, picture in controller.pictures(detection, command):  # as wide as the frame
+        assert picture.shape[1] == 640
+    assert controller.draw(detection, command).shape[1] == 640
+    bare = make_controller('improved', LaneParams(), None, improved)  # frames as they come
+    bare(bare.perceive(frame))
+    assert bare.view.key[1:] == (320, 480, (640, 480)) and bare.view.maps is None
+    assert bare.perceive(frame, keep_stages=True).image.shape[:2] == (480, 320)
