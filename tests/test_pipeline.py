@@ -224,8 +224,8 @@ def test_the_improved_controller_reads_two_columns_as_one_and_finds_the_same_lan
     # the default column_binning 2: the lecture world's 640 x 480 frames read at 320 x 480,
     # every row kept, the camera matrix's columns halved: on its straights (a single frame
     # of a bend is the search's to guess) the lane where it was rendered, as with every
-    # column; with no calibration the frame is shrunk so; the picture is drawn at the size
-    # read
+    # column; with no calibration the frame is shrunk so; the pictures are stretched back to
+    # the frame's width
     import math
     from dataclasses import replace
 
