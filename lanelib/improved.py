@@ -201,7 +201,7 @@ class ImprovedParams:
                                  'normal distribution this wide: a lane bent the other way is '
                                  'not taken for the longer line it rests on (lanefit.find_lane); '
                                  '0: off', '1/lane width', between(0, 10))
-    start_belief: str = setting('none', 'where the lane is expected until the first lane is '
+    start_belief: str = setting('centred', 'where the lane is expected until the first lane is '
                                 f"confirmed (found in {CONFIRMED} frames running): 'none' "
                                 "(wherever the pieces put it) or 'centred' (its centre under the "
                                 "robot, running along the robot's heading, where a robot is set "

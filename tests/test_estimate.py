@@ -125,11 +125,15 @@ def test_a_lane_found_after_one_was_lost_must_be_the_one_lost_but_a_first_lane_i
                    line_pieces(off - w / 2, 'white'))
     own = frame(line_pieces(w / 2, 'yellow', dashed=True) + line_pieces(-w / 2, 'white'))
     nothing = frame([])
-    params = ImprovedParams(lane='duckietown', search_angle=0.0)
+    # where the pieces put it (the default start belief pulls a first lane towards the robot)
+    params = ImprovedParams(lane='duckietown', search_angle=0.0, start_belief='none')
 
     fresh = ImprovedController(LaneParams(), params)
     fresh(beside, 0.0)
     assert fresh.lost_for == 0.0 and fresh.estimate.offset == pytest.approx(-off, abs=0.01)
+    believing = ImprovedController(LaneParams(), replace(params, start_belief='centred'))
+    believing(beside, 0.0)  # taken too, pulled part of the way towards the robot
+    assert believing.lost_for == 0.0 and 0.3 * -off < believing.estimate.offset < -off - 0.01
 
     seen = ImprovedController(LaneParams(), params)
     seen(own, 0.0)
@@ -262,7 +266,7 @@ def test_a_start_belief_expects_the_first_lane_under_the_robot_until_one_is_conf
     frame's search expects the lane where a robot is set down, its centre under the robot and
     along its heading (find_lane's anchor (0, 0)), and the first lane found is pulled towards
     it; from then on (reset() or not) the lane predicted. With 'none', no anchor but the
-    prediction's."""
+    prediction's. 'centred' is the default, the Kobuki's (no --robot) as the duckiebot's."""
     import lanelib.estimate as estimate
     given = []
     real = estimate.find_lane
@@ -271,9 +275,10 @@ def test_a_start_belief_expects_the_first_lane_under_the_robot_until_one_is_conf
     w = DT.lane_width
     beside = lane_beside(-0.3 * w)  # the robot 0.3 lane widths left of its lane's centre
 
-    def started(belief):
+    def started(belief=None):
+        chosen = {} if belief is None else {'start_belief': belief}
         robot = ImprovedController(LaneParams(), ImprovedParams(lane='duckietown', memory=0.0,
-                                                                start_belief=belief))
+                                                                **chosen))
         robot(frame([]), 0.0)  # nothing in view: still unplaced
         firsts = []
         for k in range(1, CONFIRMED + 3):
@@ -288,6 +293,11 @@ def test_a_start_belief_expects_the_first_lane_under_the_robot_until_one_is_conf
     given.clear()
     robot(beside, 10.0)
     assert given == [None]  # placed once: a lane lost later is searched for as before
+    given.clear()
+    given.clear()
+    _, default_firsts = started()
+    assert given == [(0.0, 0.0)] * (CONFIRMED + 2) + [None]
+    assert default_firsts == firsts
     given.clear()
     free, free_firsts = started('none')
     assert given == [None] * (CONFIRMED + 3)
@@ -1023,8 +1033,10 @@ def test_a_lane_only_just_found_gives_way_to_the_lane_found_next():
     gates replaces it; after, it is refused."""
     w, lane = DT.lane_width, lane_beside
 
+    # no start belief: the first lane is wherever the pieces put it, the next lane's here
     robot = ImprovedController(LaneParams(), ImprovedParams(lane='duckietown', memory=0.0,
-                                                            shift_gate=0.5, turn_gate=0.5))
+                                                            shift_gate=0.5, turn_gate=0.5,
+                                                            start_belief='none'))
     robot(lane(w), 0.0)  # the first frame's lane: the next lane's lines, taken for the robot's
     assert robot.estimate.across > 0.8 * w and robot.confirmed == 0
     robot(lane(0.0), 0.125)  # its own lane, beyond the shift gate: it replaces that one

@@ -57,7 +57,7 @@ def test_every_controller_setting_the_duckiebot_preset_names_reaches_the_control
     named = {key: value for key, value in preset.items()
              if key in ImprovedParams.__dataclass_fields__}
     assert {'curve_slowdown', 'unsure_slowdown', 'one_line_width', 'turn_gate',
-            'bend_belief', 'start_belief'} <= set(named)
+            'bend_belief'} <= set(named)
     (_, _, _, improved, _), _ = settings('--robot', 'duckiebot')
     for key, value in named.items():
         assert getattr(improved, key) == value, key

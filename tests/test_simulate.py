@@ -785,7 +785,8 @@ def test_the_benchmark_drives_the_tracks_given_in_every_world_once_per_seed(tmp_
         ('lecture', 0, 'improved', 'clean'), ('lecture', 1, 'improved', 'clean'),
         ('wood', 0, 'improved', 'clean'), ('wood', 1, 'improved', 'clean')]
     assert all(r['track'] == 'short.yaml' for r in runs)
-    assert runs[0]['rms_offset_m'] != runs[1]['rms_offset_m']  # the seeds' noise differs
+    assert runs[0]['estimate'] != runs[1]['estimate']  # the seeds' noise differs: so do the
+    # lanes read from it (the paths driven can agree to the tenth of a millimetre)
     done = {w: sum(r['completed'] for r in runs if r['world'] == w) for w in ('lecture', 'wood')}
     assert f"lecture: the improved controller completed {done['lecture']} of 2 runs" in printed
     assert f"wood: the improved controller completed {done['wood']} of 2 runs" in printed
