@@ -294,7 +294,6 @@ def test_a_start_belief_expects_the_first_lane_under_the_robot_until_one_is_conf
     robot(beside, 10.0)
     assert given == [None]  # placed once: a lane lost later is searched for as before
     given.clear()
-    given.clear()
     _, default_firsts = started()
     assert given == [(0.0, 0.0)] * (CONFIRMED + 2) + [None]
     assert default_firsts == firsts
