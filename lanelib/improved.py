@@ -40,7 +40,6 @@ import copy
 import math
 from dataclasses import dataclass, replace
 
-import cv2
 import numpy as np
 
 from lanelib.camera import LECTURE_CAMERA
@@ -422,17 +421,16 @@ class ImprovedController:
         shrink = 0 < self.p.read_width < w  # the same camera read out at fewer pixels
         if shrink:
             w, h = self.p.read_width, max(1, round(h * self.p.read_width / w))
-        # and at fewer columns, every row kept: read so by the undistortion itself
+        # and at fewer columns, every row kept: read so by the undistortion itself (with no
+        # calibration, by the resize that shrinks the frame: FloorView.read)
         source = (w, h) if self.p.column_binning > 1 and w > 1 else None
         if source:
             w = max(1, round(w / self.p.column_binning))
         if self.view is None or self.view.key != (id(self.camera), w, h, source):
             self.view = FloorView(self.camera, w, h, self.p, source)
         self.mark('start')  # the shrinking is the frame's work, timed with the undistortion
-        if shrink:
-            frame = cv2.resize(frame, source or (w, h), interpolation=cv2.INTER_AREA)
-        return perceive(frame, self.view, self.profile, self.p, self.piece_length, keep_stages,
-                        self.mark, self.pitch_error)
+        return perceive(self.view.read(frame), self.view, self.profile, self.p,
+                        self.piece_length, keep_stages, self.mark, self.pitch_error)
 
     def elapsed(self, t):
         """Seconds since the last frame: from the frames' times `t` when the loop gives them

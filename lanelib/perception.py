@@ -67,16 +67,25 @@ class FloorView:
             self.sides = view_sides(self.floor)  # the band's edge: where the view cuts a tape
             self.surroundings = floor_boxes(self.floor)
 
+    def read(self, frame):
+        """The frame as this view reads it (INTER_AREA where its size changes): shrunk to the
+        size the undistortion reads (`source`, or the view's own); with no calibration, to the
+        view's own size, the shrinking to read_width and the binning of columns one resize."""
+        size = self.source if self.maps is not None and self.source else self.mask.shape[::-1]
+        if frame.shape[1::-1] == tuple(size):
+            return frame
+        return cv2.resize(frame, size, interpolation=cv2.INTER_AREA)
+
     def undistort(self, raw):
-        """The whole undistorted frame."""
+        """The whole undistorted frame of a frame as read (read)."""
         if self.maps is None:
-            return self._as_read(raw)
+            return raw
         return cv2.remap(raw, *self.maps, cv2.INTER_LINEAR)
 
     def band(self, raw):
         """The band's rows of the undistorted frame, exactly as in the whole one."""
         if self.maps is None:
-            return self._as_read(raw)[self.first:self.last]
+            return raw[self.first:self.last]
         m1, m2 = self.maps
         return cv2.remap(raw, m1[self.first:self.last], m2[self.first:self.last],
                          cv2.INTER_LINEAR)
@@ -89,17 +98,12 @@ class FloorView:
         return cv2.resize(picture, (self.source[0], picture.shape[0]),
                           interpolation=cv2.INTER_LINEAR)
 
-    def _as_read(self, raw):
-        """A frame with no calibration, at the size this view reads (INTER_AREA)."""
-        if self.source is None:
-            return raw
-        return cv2.resize(raw, self.mask.shape[::-1], interpolation=cv2.INTER_AREA)
-
 
 def perceive(frame, view, profile, p, piece_length, keep_stages=False, mark=None, pitch=0.0):
-    """One frame's Detection: its pieces of tape (colour.Piece, robot frame) in the lane
-    profile's colours, the longest p.max_pieces of them (`cluttered` when there were more),
-    and the band's colour masks (masks, first row); the undistorted frame made when needed.
+    """One frame's Detection (the frame as `view` reads it: FloorView.read): its pieces of
+    tape (colour.Piece, robot frame) in the lane profile's colours, the longest p.max_pieces
+    of them (`cluttered` when there were more), and the band's colour masks (masks, first
+    row); the undistorted frame made when needed.
     mark: called with 'undistort', 'colour' and 'pieces' as each stage ends (tools/bench).
     pitch [deg]: the camera looks this much further down than p.mounting says (the
     controller's correction, pitch_tolerance): the pieces are put on the floor so, the band

@@ -264,3 +264,14 @@ def test_the_improved_controller_reads_two_columns_as_one_and_finds_the_same_lan
     bare(bare.perceive(frame))
     assert bare.view.key[1:] == (320, 480, (640, 480)) and bare.view.maps is None
     assert bare.perceive(frame, keep_stages=True).image.shape[:2] == (480, 320)
+    # shrunk to read_width as well: one resize from the frame to the size read, not a
+    # shrunk copy resized again
+    small = make_controller('improved', LaneParams(), None, replace(improved, read_width=320))
+    small(small.perceive(frame))
+    assert small.view.key[1:] == (160, 240, (320, 240))
+    once = cv2.resize(frame, (160, 240), interpolation=cv2.INTER_AREA)
+    twice = cv2.resize(cv2.resize(frame, (320, 240), interpolation=cv2.INTER_AREA), (160, 240),
+                       interpolation=cv2.INTER_AREA)
+    assert not np.array_equal(once, twice)  # the frame tells them apart
+    assert np.array_equal(small.view.read(frame), once)
+    assert np.array_equal(small.perceive(frame, keep_stages=True).image, once)
