@@ -70,8 +70,8 @@ def stage_pictures(controller, detection, command):
         for a, b in zip(u[ok], v[ok]):
             cv2.circle(picture, (int(a), int(b)), 2, colour, -1)
     out.append(('pieces', "4 tape pieces: the lane's left, right; others grey", picture))
-    # each picture of the image read as wide as the frame (column_binning: stretched back)
-    out = [(key, title, view.shown(picture) if key != 'raw' else picture)
-           for key, title, picture in out]
+    # each picture of the image read as wide as the frame (column_binning: stretched back; with
+    # no calibration the frame itself is read binned)
+    out = [(key, title, view.shown(picture)) for key, title, picture in out]
     out.append(('lane', '5 the lane, the decision', draw_lane(controller, detection, command)))
     return out
