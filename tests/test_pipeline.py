@@ -263,8 +263,8 @@ def test_the_improved_controller_reads_two_columns_as_one_and_finds_the_same_lan
     bare = make_controller('improved', LaneParams(), None, improved)  # frames as they come
     bare(bare.perceive(frame))
     assert bare.view.key[1:] == (320, 480, (640, 480)) and bare.view.maps is None
-    assert bare.perceive(frame, keep_stages=True).image.shape[:2] == (480, 320)
     detection = bare.perceive(frame, keep_stages=True)
+    assert detection.image.shape[:2] == (480, 320)
     for _, _, picture in bare.pictures(detection, bare(detection)):  # the raw frame's too
         assert picture.shape[1] == 640
     # shrunk to read_width as well: one resize from the frame to the size read, not a
