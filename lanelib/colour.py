@@ -227,8 +227,9 @@ def tape_pieces(mask, colour, matrix, mounting, tape_width, min_length, step, ro
             continue
         # across by distance ahead first (the image's rows), then each part that is still
         # longer than that (a line running across the view) across its own length
-        n = max(1, int(round(np.ptp(x) / step)))  # equal parts, none a short stub
-        which = np.minimum((x - x.min()) / max(np.ptp(x), 1e-9) * n, n - 1).astype(int)
+        low, span = x.min(), np.ptp(x)
+        n = max(1, int(round(span / step)))  # equal parts, none a short stub
+        which = np.minimum((x - low) / max(span, 1e-9) * n, n - 1).astype(int)
         for b in range(n):
             band = np.flatnonzero(which == b)
             for part in _halves(x[band], y[band], 1.5 * step):
@@ -254,17 +255,17 @@ def _labelled(mask):
 
 
 def _axis(x, y):
-    """(spread, axes) of points: the variances along, and the directions of, their principal
-    axes (the longest last; axes[:, 1] is the longest's direction). The 2x2 covariance's
-    eigenvectors in closed form (numpy's general ones cost more than the rest of a piece)."""
+    """(narrow, long, c, s) of points: the variances across and along their principal axis,
+    and its direction (cos, sin). The 2x2 covariance's eigenvectors in closed form (numpy's
+    general ones cost more than the rest of a piece), as floats: two small arrays made for
+    four numbers cost more than the numbers."""
     n = len(x)
     dx, dy = x - x.sum() / n, y - y.sum() / n  # the means, as np.mean makes them, sooner
     sxx, syy, sxy = (float(dx @ dx) / (n - 1), float(dy @ dy) / (n - 1),
                      float(dx @ dy) / (n - 1))
     half, root = (sxx + syy) / 2, math.hypot((sxx - syy) / 2, sxy)
     angle = 0.5 * math.atan2(2 * sxy, sxx - syy)  # of the longest axis
-    c, s = math.cos(angle), math.sin(angle)
-    return np.array([half - root, half + root]), np.array([[-s, c], [c, s]])
+    return half - root, half + root, math.cos(angle), math.sin(angle)
 
 
 def _halves(x, y, longest):
@@ -276,11 +277,11 @@ def _halves(x, y, longest):
         if len(part) < 10:
             continue
         px, py = x[part], y[part]
-        if math.hypot(np.ptp(px), np.ptp(py)) <= longest:  # no longer than that any way
-            parts.append(part)
+        if math.hypot(px.max() - px.min(), py.max() - py.min()) <= longest:  # np.ptp's,
+            parts.append(part)  # in fewer calls: no longer than that any way
             continue
-        _, axes = _axis(px, py)
-        along = x[part] * axes[0, 1] + y[part] * axes[1, 1]
+        _, _, c, s = _axis(px, py)
+        along = px * c + py * s
         low, high = along.min(), along.max()
         if high - low <= longest:
             parts.append(part)
@@ -303,19 +304,20 @@ def _piece(x, y, cut, colour, tape_width, min_length, max_points, region=None,
     if cut.any():
         # where the view cuts the tape, the tape's cross-sections are partial and their middle
         # is off its centre: leave out the points level (along the tape) with the cut
-        _, axes = _axis(x, y)
-        along = x * axes[0, 1] + y * axes[1, 1]
+        _, _, c, s = _axis(x, y)
+        along = x * c + y * s
         whole = (along < along[cut].min()) | (along > along[cut].max())
         x, y = x[whole], y[whole]
     if len(x) < 10:
         return None
     x, y = x[::max(1, len(x) // max_points)], y[::max(1, len(x) // max_points)]
-    spread, axes = _axis(x, y)
+    narrow, long, c, s = _axis(x, y)
     # a uniform strip of length L has a standard deviation of L / sqrt(12) along it
-    length = math.sqrt(12 * max(spread[1], 0.0))
-    width = math.sqrt(12 * max(spread[0], 0.0))
+    length = math.sqrt(12 * max(long, 0.0))
+    width = math.sqrt(12 * max(narrow, 0.0))
     if (length < min_length or length < elongation * width or
             not 0.4 * tape_width <= width <= 3.0 * tape_width):
         return None
-    d = axes[:, 1] if axes[0, 1] >= 0 else -axes[:, 1]  # pointing ahead
-    return Piece(x, y, math.atan2(d[1], d[0]), colour, length, width, region)
+    if c < 0:  # pointing ahead
+        c, s = -c, -s
+    return Piece(x, y, math.atan2(s, c), colour, length, width, region)
