@@ -92,9 +92,21 @@ def repitched(x, y, mounting, turn_deg):
     looks `turn_deg` further down than the mounting says: each pixel's ray turned down as much
     (exact for a camera turned about its own sideways axis; a pitch off by d draws a point
     d_true ahead of the lens at (d_true + h tan d) / (1 - d_true tan d / h), and its sideways
-    distance 1 / (cos d (1 - d_true tan d / h)) as far out)."""
-    t = math.tan(math.radians(turn_deg))
+    distance 1 / (cos d (1 - d_true tan d / h)). turn_deg may be an array, broadcast against
+    x and y: the points at each of several turns in one array, each turn's part the same
+    numbers as alone."""
+    t, cos = _tan_cos(turn_deg)
     ahead = np.asarray(x, float) - mounting.forward
     scale = np.maximum(1.0 + ahead * t / mounting.height, 1e-3)  # (beyond the horizon: far)
     return (mounting.forward + (ahead - mounting.height * t) / scale,
-            np.asarray(y, float) / (scale * math.cos(math.radians(turn_deg))))
+            np.asarray(y, float) / (scale * cos))
+
+
+def _tan_cos(degrees):
+    """tan and cos of an angle [deg], or of each of an array of them (math's, value by value)."""
+    if np.ndim(degrees) == 0:
+        return math.tan(math.radians(degrees)), math.cos(math.radians(degrees))
+    flat = [math.radians(v) for v in np.ravel(degrees)]
+    shape = np.shape(degrees)
+    return (np.reshape([math.tan(v) for v in flat], shape),
+            np.reshape([math.cos(v) for v in flat], shape))

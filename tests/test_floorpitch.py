@@ -87,6 +87,19 @@ def test_the_drawing_is_what_the_reader_undoes():
     assert not np.allclose(drawn, (x, y), atol=1e-3)
 
 
+def test_several_pitches_at_once_are_each_pitch_alone():
+    """The reader moves a frame's points to three pitches in one array: each pitch's part is
+    the same numbers, to the last bit, as the points moved to that pitch alone."""
+    x, y = np.array([0.2, 0.5, 0.7, 1.9]), np.array([0.1, -0.1, 0.05, 0.3])
+    turns = np.array([[1.5], [-0.25], [3.0]])
+    nx, ny = repitched(x, y, MOUNTING, turns)
+    assert nx.shape == ny.shape == (3, 4)
+    for turn, row_x, row_y in zip(turns[:, 0], nx, ny):
+        alone = repitched(x, y, MOUNTING, float(turn))
+        assert np.array_equal(row_x, alone[0]) and np.array_equal(row_y, alone[1])
+    assert not np.array_equal(nx[0], nx[1])
+
+
 @pytest.mark.parametrize('radius', [None, 0.3, -0.175, 1.0])
 @pytest.mark.parametrize('error', [-3.0, -1.0, 0.0, 2.0, 3.5])
 def test_the_pitch_is_read_on_straights_and_in_corners(radius, error):
