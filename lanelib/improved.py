@@ -417,15 +417,7 @@ class ImprovedController:
         return self.p.mounting.looking_down(self.pitch_error)
 
     def perceive(self, frame, keep_stages=False):
-        h, w = frame.shape[:2]
-        shrink = 0 < self.p.read_width < w  # the same camera read out at fewer pixels
-        if shrink:
-            w, h = self.p.read_width, max(1, round(h * self.p.read_width / w))
-        # and at fewer columns, every row kept: read so by the undistortion itself (with no
-        # calibration, by the resize that shrinks the frame: FloorView.read)
-        source = (w, h) if self.p.column_binning > 1 and w > 1 else None
-        if source:
-            w = max(1, round(w / self.p.column_binning))
+        w, h, source = FloorView.size_for(frame, self.p)
         if self.view is None or self.view.key != (id(self.camera), w, h, source):
             self.view = FloorView(self.camera, w, h, self.p, source)
         self.mark('start')  # the shrinking is the frame's work, timed with the undistortion

@@ -67,6 +67,21 @@ class FloorView:
             self.sides = view_sides(self.floor)  # the band's edge: where the view cuts a tape
             self.surroundings = floor_boxes(self.floor)
 
+    @staticmethod
+    def size_for(frame, p):
+        """(width, height, source) of the view that reads `frame` with settings p: the same
+        camera read out at fewer pixels (p.read_width), and at fewer columns, every row kept
+        (p.column_binning): read so by the undistortion itself, from `source` (the size
+        shrunk to read_width; None with no binning), or with no calibration by the one resize
+        that shrinks the frame (read)."""
+        h, w = frame.shape[:2]
+        if 0 < p.read_width < w:
+            w, h = p.read_width, max(1, round(h * p.read_width / w))
+        source = (w, h) if p.column_binning > 1 and w > 1 else None
+        if source:
+            w = max(1, round(w / p.column_binning))
+        return w, h, source
+
     def read(self, frame):
         """The frame as this view reads it (INTER_AREA where its size changes): shrunk to the
         size the undistortion reads (`source`, or the view's own); with no calibration, to the
