@@ -559,12 +559,15 @@ def _fit_bend(points, on, lane, lane_width, priors, limits):
     further out of it; else None. A bend's entry
     seen from its straight, an S-bend's turn the other way: one arc through the robot fits
     such a lane only turned away from it at the robot. Levenberg-Marquardt in (e, psi, k, k2,
-    s0, width) from s0 at BEND_STARTS, each from the one arc and from parabolas through the
-    points before and after s0; the one arc's priors, k2 and s0 free; derivatives by
-    differences. The starts are fitted side by side in arrays (one evaluation of every start
-    and its steps per iteration): a start at a time took about 10 ms a frame. None without
-    fitting where even the bend linearised about the one arc leaves more than BEND_SCREEN of
-    its distances (_bend_gain: one solve, about 0.1 ms against a fit's 3)."""
+    s0, width) from s0 at BEND_STARTS, each from parabolas through the points before and
+    after s0, or from the one arc where too few points lie before s0 for a parabola; the one
+    arc's priors, k2 and s0 free; derivatives by differences. Both starts at every knot (six
+    fits, not three) kept the same 95 of 333 recorded bends at 2.00 ms a call against 1.72:
+    where a knot's parabolas could be made, its arc start won 5 of 168 fits. The starts are
+    fitted side by side in arrays (one evaluation of every start and its steps per
+    iteration): a start at a time took about 10 ms a frame. None without fitting where even
+    the bend linearised about the one arc leaves more than BEND_SCREEN of its distances
+    (_bend_gain: one solve, about 0.1 ms against a fit's 3)."""
     x, y, w = points
     w = (on != 0) * w
     own = w > 0  # the lane's own points: the fit needs only these, the last check every one
@@ -599,14 +602,15 @@ def _fit_bend(points, on, lane, lane_width, priors, limits):
     e, psi, k = lane[:3]
     own = list(lane[3:])  # the width (and spread)
     starts = []
-    for s0 in knots:
-        starts.append([e, psi, k, k, s0, *own])
+    for s0 in knots:  # one start a knot: the parabolas where they can be made, else the arc
         near, far = x < s0, x >= s0
         if np.count_nonzero(near) >= 2 * POINTS:  # before s0 a line or a parabola, after
             a, slope, k1 = _parabola(x[near], (y - on * halves)[near], w[near])
             k2 = _parabola(x[far], (y - on * halves)[far], w[far])[2] if (
                 np.count_nonzero(far) >= 3 * POINTS) else k
             starts.append([a, math.atan(slope), k1, k2, s0, *own])
+        else:
+            starts.append([e, psi, k, k, s0, *own])
     moves = np.zeros((6, n))
     moves[1:, :5] = np.diag(steps)
 
