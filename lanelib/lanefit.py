@@ -602,11 +602,12 @@ def _fit_bend(points, on, lane, lane_width, priors, limits):
     e, psi, k = lane[:3]
     own = list(lane[3:])  # the width (and spread)
     starts = []
+    centre = y - on * halves  # each point moved across onto the lane's centre line
     for s0 in knots:  # one start a knot: the parabolas where they can be made, else the arc
         near, far = x < s0, x >= s0
         if np.count_nonzero(near) >= 2 * POINTS:  # before s0 a line or a parabola, after
-            a, slope, k1 = _parabola(x[near], (y - on * halves)[near], w[near])
-            k2 = _parabola(x[far], (y - on * halves)[far], w[far])[2] if (
+            a, slope, k1 = _parabola(x[near], centre[near], w[near])
+            k2 = _parabola(x[far], centre[far], w[far])[2] if (
                 np.count_nonzero(far) >= 3 * POINTS) else k
             starts.append([a, math.atan(slope), k1, k2, s0, *own])
         else:
