@@ -147,6 +147,22 @@ def test_the_benchmark_drives_a_preset_with_the_settings_the_node_resolves_from_
     assert improved.lane_width == spec.track.lane_width
 
 
+def test_the_benchmark_judges_every_driving_row_against_the_aim_by_its_median_and_p95():
+    from tools.bench import against_aim
+
+    def row(median, p95):
+        return dict(total=dict(median_ms=median, p95_ms=p95))
+
+    rows = dict(Kobuki=row(6.8, 7.5), duckiebot=row(6.0, 8.1))
+    aim = against_aim(rows, 3.4)
+    assert (aim['slowest_median_ms'], aim['largest_p95_ms'], aim['under_aim']) == (6.8, 8.1, True)
+    assert aim['over_literal'] == dict(Kobuki=2.0, duckiebot=1.76)
+    # one row's p95 over the aim is enough to miss it, and so is one row's median
+    assert not against_aim(dict(rows, odometry=row(6.5, 10.2)), 3.4)['under_aim']
+    assert not against_aim(dict(rows, odometry=row(10.0, 10.0)), 3.4)['under_aim']
+    assert against_aim(rows, 3.4, aim_ms=8.0)['under_aim'] is False
+
+
 def test_the_benchmark_times_the_improved_perception_with_the_lane_profile_asked_for():
     frame = sample_frames()[0]
     for lane, colours in (('lecture', {'any', 'red'}), ('duckietown', {'white', 'yellow', 'red'})):
