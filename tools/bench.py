@@ -32,7 +32,8 @@ every built-in track, with offsets, noise, a lighting gradient and gaps), prints
               and those again with the base's odometry followed and --pitch-from motion;
               the driving rows against AIM_MS (their slowest median and largest p95), and
               each as a multiple of the literal code's frame timed beside the improved one:
-              a measure that does not depend on the machine's hour, where the milliseconds do
+              it moves less with the machine's hour than the milliseconds do (1.6 to 2.0
+              over five runs on 2026-12-06, docs/benchmarks.md)
   worst case  cluttered frames (dense texture, many edges; plain floor with up to 1,600
               lines): the lecture's Hough stage, the improved controller's whole frame
 
@@ -612,8 +613,8 @@ def main(argv=None):
           f"the floor's motion, timed in 'steer'): {drive['frames']} frames:")
     print(stage_table(drive))
     report['against_aim'] = aim = against_aim(
-        {name: report[f'improved_driving{key}'] for name, key in
-         (('Kobuki', ''), ('duckiebot', '_duckiebot'), ('odometry', '_duckiebot_odometry'))},
+        dict(Kobuki=report['improved_driving'], duckiebot=report['improved_driving_duckiebot'],
+             odometry=report['improved_driving_duckiebot_odometry']),
         imp['literal']['total']['median_ms'])
     print(f"\ndriving, every row: the slowest median {aim['slowest_median_ms']:.3f} ms, the "
           f"largest p95 {aim['largest_p95_ms']:.3f} ms: "
